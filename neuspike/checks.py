@@ -1,0 +1,67 @@
+"""Small named input checks for public functions.
+
+Each raises :class:`neuspike.errors.InputError` with the expected and the actual value.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from neuspike.errors import InputError
+
+
+def check_ndim(name: str, array: np.ndarray, ndim: int) -> None:
+    """Raise unless ``array`` has ``ndim`` dimensions."""
+    if np.ndim(array) != ndim:
+        raise InputError(f"{name}: expected a {ndim}-D array, got shape {np.shape(array)}")
+
+
+def check_finite_nonnegative(name: str, array: np.ndarray) -> None:
+    """Raise if ``array`` holds NaN, infinity or a negative value."""
+    a = np.asarray(array)
+    if a.size == 0:
+        return
+    if not np.isfinite(a).all():
+        bad = int(np.count_nonzero(~np.isfinite(a)))
+        raise InputError(f"{name}: expected finite values, got {bad} NaN or infinite entries")
+    lo = a.min()
+    if lo < 0:
+        raise InputError(f"{name}: expected values >= 0, got a minimum of {float(lo)!r}")
+
+
+def check_positive(name: str, value: Any) -> float:
+    """Return ``value`` as a float, raising unless it is finite and > 0."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a positive number, got {value!r}") from None
+    if not np.isfinite(v) or v <= 0:
+        raise InputError(f"{name}: expected a positive finite number, got {value!r}")
+    return v
+
+
+def check_nonnegative(name: str, value: Any) -> float:
+    """Return ``value`` as a float, raising unless it is finite and >= 0."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number >= 0, got {value!r}") from None
+    if not np.isfinite(v) or v < 0:
+        raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
+    return v
+
+
+def check_positive_int(name: str, value: Any) -> int:
+    """Return ``value`` as an int, raising unless it is a whole number >= 1."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"{name}: expected a whole number >= 1, got {value!r}")
+    if value < 1:
+        raise InputError(f"{name}: expected a whole number >= 1, got {value!r}")
+    return int(value)
+
+
+def check_size(name: str, width: Any, height: Any) -> tuple[int, int]:
+    """Return ``(width, height)`` as ints, raising unless both are whole numbers >= 1."""
+    return check_positive_int(f"{name} width", width), check_positive_int(f"{name} height", height)

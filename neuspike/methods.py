@@ -1,0 +1,201 @@
+"""The method interface and the registry every reconstruction method lives in.
+
+A method is a small object with a ``name``, the set of ``inputs`` it needs (``{"spikes"}``,
+``{"events"}`` or both), its ``params``, and ``reconstruct(sample) -> float32 (H, W)`` in [0, 1] in
+the ground truth's units. Subclasses implement :meth:`Method._reconstruct`, which returns the image
+and a short label of the normalisation it applied (e.g. ``"gain"`` when the stream's known gain was
+divided out, ``"robust-p99"`` when it was not known); :meth:`Method.reconstruct` checks the inputs
+and the output and records the label in ``last_normalisation``.
+
+Variants are registry entries over one implementation: ``register("tfp-w8", TFP, window=8)``.
+Methods from other packages register through the entry-point group ``neuspike.methods``: each
+entry point names a callable that is called with no arguments and registers its methods (the
+suite's own baselines arrive the same way, so this package never imports them).
+"""
+
+from __future__ import annotations
+
+import abc
+import threading
+from dataclasses import dataclass, field
+from importlib import metadata
+from types import MappingProxyType
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from neuspike.errors import InputError, NeuSpikeError
+from neuspike.sample import Sample
+
+ENTRY_POINT_GROUP = "neuspike.methods"
+
+
+class MethodUnavailable(NeuSpikeError, RuntimeError):
+    """A method cannot run here (e.g. its weights were not given); the message says why."""
+
+
+class Method(abc.ABC):
+    """Base class of reconstruction methods.
+
+    Class attributes
+    ----------------
+    inputs : frozenset of str
+        The modalities the method needs.
+    recurrent : bool
+        ``True`` for methods with state across calls; :meth:`reset` clears it.
+    """
+
+    inputs: frozenset[str] = frozenset()
+    recurrent: bool = False
+
+    def __init__(self, name: str | None = None, **params: Any) -> None:
+        self.name = name or type(self).__name__.lower()
+        self.params: dict[str, Any] = dict(params)
+        self.last_normalisation: str | None = None
+
+    def reset(self) -> None:
+        """Clear recurrent state (start of a new sequence). Stateless methods do nothing."""
+
+    def parameter_count(self) -> int:
+        """Number of learned parameters (0 for classical methods)."""
+        return 0
+
+    @abc.abstractmethod
+    def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
+        """Return ``(image, normalisation_label)``; ``image`` float32 (H, W) in [0, 1]."""
+
+    def reconstruct(self, sample: Sample) -> np.ndarray:
+        """Reconstruct the image at ``sample.key_time_s``.
+
+        Returns
+        -------
+        ndarray, float32, shape (H, W), values in [0, 1].
+
+        Raises
+        ------
+        InputError
+            When the sample lacks an input the method needs.
+        NeuSpikeError
+            When the method produced an invalid image (wrong shape, non-finite, out of range):
+            a defect of the method, reported rather than patched over.
+        """
+        missing = set(self.inputs) - set(sample.modalities)
+        if missing:
+            raise InputError(f"method {self.name!r} needs {sorted(self.inputs)}, the sample lacks {sorted(missing)}")
+        image, label = self._reconstruct(sample)
+        image = np.asarray(image)
+        if image.shape != (sample.height, sample.width):
+            raise NeuSpikeError(
+                f"method {self.name!r} returned shape {image.shape}, expected {(sample.height, sample.width)}"
+            )
+        if image.dtype != np.float32:
+            raise NeuSpikeError(f"method {self.name!r} returned dtype {image.dtype}, expected float32")
+        if not np.isfinite(image).all():
+            raise NeuSpikeError(f"method {self.name!r} returned non-finite values")
+        if image.size and (image.min() < 0 or image.max() > 1):
+            raise NeuSpikeError(
+                f"method {self.name!r} returned values in [{image.min()}, {image.max()}], expected [0, 1]"
+            )
+        self.last_normalisation = label
+        return image
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "inputs": sorted(self.inputs),
+            "params": dict(self.params),
+            "recurrent": self.recurrent,
+            "parameters": self.parameter_count(),
+        }
+
+
+@dataclass(frozen=True)
+class MethodEntry:
+    """A registry entry: a factory (usually a Method subclass) and the parameters of this variant."""
+
+    name: str
+    factory: Callable[..., Method]
+    params: Mapping[str, Any] = field(default_factory=dict)
+    inputs: frozenset[str] = frozenset()
+    description: str = ""
+
+
+_REGISTRY: dict[str, MethodEntry] = {}
+_LOCK = threading.Lock()
+_ENTRY_POINTS_LOADED = False
+
+
+def register(
+    name: str,
+    factory: Callable[..., Method],
+    *,
+    params: Mapping[str, Any] | None = None,
+    inputs: frozenset[str] | set[str] | None = None,
+    description: str = "",
+) -> MethodEntry:
+    """Add a method (or a variant of one) to the registry.
+
+    Raises
+    ------
+    InputError
+        If ``name`` is already registered or is not a non-empty string.
+    """
+    if not isinstance(name, str) or not name.strip():
+        raise InputError(f"method name must be a non-empty string, got {name!r}")
+    ins = frozenset(inputs if inputs is not None else getattr(factory, "inputs", frozenset()))
+    if not ins or not ins <= {"spikes", "events"}:
+        raise InputError(f"method {name!r}: inputs must be a non-empty subset of {{'spikes', 'events'}}, got {sorted(ins)}")
+    entry = MethodEntry(name, factory, MappingProxyType(dict(params or {})), ins, description)
+    with _LOCK:
+        if name in _REGISTRY:
+            raise InputError(f"method {name!r} is already registered")
+        _REGISTRY[name] = entry
+    return entry
+
+
+def unregister(name: str) -> None:
+    """Remove a method (for tests and interactive use)."""
+    with _LOCK:
+        if name not in _REGISTRY:
+            raise InputError(f"unknown method {name!r}")
+        del _REGISTRY[name]
+
+
+def load_entry_points(force: bool = False) -> list[str]:
+    """Call every ``neuspike.methods`` entry point once; return the problems met (if any)."""
+    global _ENTRY_POINTS_LOADED
+    if _ENTRY_POINTS_LOADED and not force:
+        return []
+    _ENTRY_POINTS_LOADED = True
+    problems = []
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            ep.load()()
+        except Exception as exc:  # a broken plug-in must not hide the others
+            problems.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
+    return problems
+
+
+def available() -> list[str]:
+    """Names of all registered methods, sorted."""
+    load_entry_points()
+    return sorted(_REGISTRY)
+
+
+def entry(name: str) -> MethodEntry:
+    """The registry entry of ``name``; unknown names raise :class:`InputError`."""
+    load_entry_points()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise InputError(f"unknown method {name!r}; available: {', '.join(sorted(_REGISTRY)) or 'none'}") from None
+
+
+def create(name: str, **overrides: Any) -> Method:
+    """Instantiate a registered method, with optional parameter overrides."""
+    e = entry(name)
+    params = {**e.params, **overrides}
+    method = e.factory(name=name, **params)
+    if not isinstance(method, Method):
+        raise NeuSpikeError(f"factory of {name!r} returned {type(method).__name__}, not a Method")
+    return method
