@@ -1,0 +1,407 @@
+"""TFSTP, texture from short-term plasticity (Zheng et al., CVPR 2021).
+
+Each pixel drives a short-term-plasticity synapse with two states, the available resources ``R`` and
+the utilisation ``u``. Between spikes ``R`` recovers towards 1 with time constant ``D`` and ``u``
+decays towards ``u0`` with time constant ``F``; a spike uses the fraction ``u`` of the resources and
+raises ``u`` by ``f (1 - u)``. Applied at each spike with ``Δ`` the interval in planes since the
+pixel's previous spike (both updates from the values before the spike):
+
+    R <- 1 - [1 - R (1 - u)] exp(-Δ / D)
+    u <- u0 + [u + f (1 - u) - u0] exp(-Δ / F)
+
+Start ``R = 1``, ``u = u0``. Defaults ``u0 = 0.15``, ``D = 1``, ``F = 10``, ``f = 0.15`` (planes).
+
+Steady state and read-out
+-------------------------
+Under a periodic train of interval ``Δ`` the states reach fixed points ``R*``, ``u*``. Solving each
+update for ``exp(-Δ / time constant)`` at the fixed point gives
+
+    exp(-Δ / D) = (1 - R*) / (1 - R* (1 - u*))
+    exp(-Δ / F) = (u* - u0) / (u* (1 - f) + f - u0)
+
+so each state inverts to a rate ``1 / Δ``:
+
+    ρ_R = -1 / (D ln[(1 - R) / (1 - R (1 - u))])  =  1 / (D log1p(u R / (1 - R)))
+    ρ_u = -1 / (F ln[(u - u0) / (u (1 - f) + f - u0)])  =  1 / (F log1p(f (1 - u) / (u - u0)))
+
+(the second denominator has the facilitation step ``f``, not the time constant ``F``: only that form
+is the inverse of the update). The read-out is exact: on a converged periodic train both return
+``1 / Δ``. The method reports their mean, ``(ρ_R + ρ_u) / 2``, equal to ``1 / Δ`` at steady state;
+``ρ_R`` follows the last interval closely (``D`` is one plane), ``ρ_u`` averages over about ``F``
+planes. A variable at rest carries no interval (see below), so where only one of them has moved,
+that one is the estimate. The radiance is then rate / gain (or the robust normalisation when the
+gain is unknown).
+
+Numerics
+--------
+With ``D = 1`` plane, ``1 - R`` falls to ``exp(-Δ)``: ``1e-14`` after 32 planes, below float64's
+resolution of ``R`` itself after about 37. The states are therefore kept as their distances from rest,
+``q = 1 - R`` and ``v = u - u0``, which obey the same updates without cancellation::
+
+    q <- [u + q (1 - u)] exp(-Δ / D)
+    v <- [v (1 - f) + f (1 - u0)] exp(-Δ / F)
+
+and the read-out uses the ``log1p`` forms above (as ``log(a + b) - log(b)`` where ``b`` is so small
+that ``a / b`` would overflow).
+
+Degenerate pixels, handled explicitly
+-------------------------------------
+* A pixel's first spike has no interval: it only starts the clock (the states stay at rest). A pixel
+  with fewer than two spikes up to the key plane is thus at rest, ``q = v = 0``, and the read-out of
+  a state at rest is its limit, rate 0 (an infinitely long interval), not ``log(0)``.
+* ``q`` underflows to 0 for intervals beyond about 745 ``D`` planes (``v`` beyond about 745 ``F``);
+  the read-out of that variable is then 0, its limit, and the estimate is the other read-out alone.
+
+Which planes: the state at the key plane ``k`` is the state after the pixel's last spike at or
+before ``k`` (planes after ``k`` are not used: the model is causal). It is updated only where spikes
+occur, plane by plane, over the pixels that fire in that plane.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from baselines.normalisation import rate_to_image
+from baselines.tfp import check_spike_window
+from neuspike.checks import check_positive
+from neuspike.errors import InputError, NeuSpikeError
+from neuspike.methods import Method
+from neuspike.sample import Sample
+
+U0 = 0.15
+RECOVERY_PLANES = 1.0  # D
+FACILITATION_PLANES = 10.0  # F
+FACILITATION = 0.15  # f
+
+#: Upper bound of the time constants (planes): keeps exp(-1 / tau) distinguishable from 1.
+MAX_TIME_CONSTANT_PLANES = 1.0e4
+# Below this, a / b (a <= 1) could overflow; the read-out switches to a difference of logarithms.
+_TINY = 1.0e-290
+
+
+def check_stp_params(
+    u0: Any, recovery_planes: Any, facilitation_planes: Any, facilitation: Any
+) -> tuple[float, float, float, float]:
+    """Validate the STP parameters; return them as floats.
+
+    ``u0`` and ``facilitation`` in (0, 1); ``recovery_planes`` and ``facilitation_planes`` in
+    (0, MAX_TIME_CONSTANT_PLANES].
+    """
+    out = []
+    for name, value in (("u0", u0), ("facilitation", facilitation)):
+        v = check_positive(name, value)
+        if v >= 1:
+            raise InputError(f"{name}: expected a number in (0, 1), got {value!r}")
+        out.append(v)
+    taus = []
+    for name, value in (("recovery_planes", recovery_planes), ("facilitation_planes", facilitation_planes)):
+        v = check_positive(name, value)
+        if v > MAX_TIME_CONSTANT_PLANES:
+            raise InputError(
+                f"{name}: expected a time constant in (0, {MAX_TIME_CONSTANT_PLANES:g}] planes, got {value!r}"
+            )
+        taus.append(v)
+    return out[0], taus[0], taus[1], out[1]
+
+
+def _step_inplace(
+    q: np.ndarray, v: np.ndarray, decay_r: np.ndarray, decay_u: np.ndarray, u0: float, f: float, scratch: np.ndarray
+) -> None:
+    """One spike's update of ``q = 1 - R`` and ``v = u - u0``, in place.
+
+    ``q <- [q (1 - u) + u] decay_r`` and ``v <- [v (1 - f) + f (1 - u0)] decay_u``, where
+    ``u = u0 + v`` before the spike, ``decay_r = exp(-Δ/D)`` and ``decay_u = exp(-Δ/F)``. Every term
+    is non-negative, so nothing cancels. ``scratch`` is a float64 buffer of the same shape.
+    """
+    np.subtract(1.0 - u0, v, out=scratch)  # 1 - u
+    q *= scratch
+    q += u0
+    q += v
+    q *= decay_r
+    v *= 1.0 - f
+    v += f * (1.0 - u0)
+    v *= decay_u
+
+
+def stp_step(
+    r_deficit: np.ndarray,
+    u_excess: np.ndarray,
+    isi_planes: np.ndarray | float,
+    *,
+    u0: float = U0,
+    recovery_planes: float = RECOVERY_PLANES,
+    facilitation_planes: float = FACILITATION_PLANES,
+    facilitation: float = FACILITATION,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The update at one spike, on the states' distances from rest.
+
+    Parameters
+    ----------
+    r_deficit : array float64, values in [0, 1)
+        ``q = 1 - R`` before the spike.
+    u_excess : array float64, values in [0, 1 - u0)
+        ``v = u - u0`` before the spike.
+    isi_planes : array or float, > 0
+        Δ, the interval since the previous spike, in planes.
+    u0, recovery_planes, facilitation_planes, facilitation : float
+        ``u0``, ``D``, ``F`` and ``f`` of the model.
+
+    Returns
+    -------
+    r_deficit, u_excess : float64 arrays, the states after the update (broadcast shape).
+    """
+    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    isi = np.asarray(isi_planes, dtype=np.float64)
+    if isi.size and not (np.isfinite(isi).all() and (isi > 0).all()):
+        raise InputError("isi_planes: expected finite intervals > 0 planes")
+    q, v, isi = np.broadcast_arrays(
+        np.asarray(r_deficit, dtype=np.float64), np.asarray(u_excess, dtype=np.float64), isi
+    )
+    q, v = q.copy(), v.copy()
+    _step_inplace(q, v, np.exp(-isi / d), np.exp(-isi / big_f), u0, f, np.empty_like(q))
+    return q, v
+
+
+def _log1p_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``log1p(a / b)`` for ``0 < a <= 1`` and ``b > 0``, without overflow for tiny ``b``."""
+    out = np.empty_like(b)
+    ok = b >= _TINY
+    out[ok] = np.log1p(a[ok] / b[ok])
+    tiny = ~ok
+    if tiny.any():
+        out[tiny] = np.log(a[tiny] + b[tiny]) - np.log(b[tiny])
+    return out
+
+
+def stp_rates(
+    r_deficit: np.ndarray,
+    u_excess: np.ndarray,
+    *,
+    u0: float = U0,
+    recovery_planes: float = RECOVERY_PLANES,
+    facilitation_planes: float = FACILITATION_PLANES,
+    facilitation: float = FACILITATION,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Invert the steady state of each variable to a rate (spikes per plane).
+
+    Parameters
+    ----------
+    r_deficit : array float64, values in [0, 1)
+        ``q = 1 - R``.
+    u_excess : array float64, values in [0, 1 - u0)
+        ``v = u - u0``.
+    u0, recovery_planes, facilitation_planes, facilitation : float
+        ``u0``, ``D``, ``F`` and ``f``.
+
+    Returns
+    -------
+    rate_r, rate_u : float64 arrays >= 0
+        ``ρ_R = 1 / (D log1p(u R / (1 - R)))`` and ``ρ_u = 1 / (F log1p(f (1 - u) / (u - u0)))``;
+        0 where the variable is at rest (``q = 0`` or ``v = 0``).
+
+    Raises
+    ------
+    InputError
+        If a state lies outside its range (the model cannot reach it).
+    """
+    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    q = np.asarray(r_deficit, dtype=np.float64)
+    v = np.asarray(u_excess, dtype=np.float64)
+    q, v = np.broadcast_arrays(q, v)
+    if q.size and not (np.isfinite(q).all() and (q >= 0).all() and (q < 1).all()):
+        raise InputError("r_deficit: expected 1 - R in [0, 1)")
+    if v.size and not (np.isfinite(v).all() and (v >= 0).all() and (v < 1 - u0).all()):
+        raise InputError(f"u_excess: expected u - u0 in [0, {1 - u0})")
+    return _rates(q, v, u0, d, big_f, f)
+
+
+def _inverse_interval(tau: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``1 / (tau log1p(a / b))``, the rate whose steady state gives the ratio ``b / (a + b)``."""
+    log_term = _log1p_ratio(a, b)
+    if not (log_term > 0).all():
+        # a > 0 always holds for valid parameters (u >= u0 > 0, R > 0, and u < 1 since every
+        # update decays by exp(-Δ/F) < 1); a zero here would mean an infinite rate.
+        raise NeuSpikeError("TFSTP read-out: a state reached its saturation (u = 1 or R = 0); check the parameters")
+    return 1.0 / (tau * log_term)
+
+
+def _rates(
+    q: np.ndarray, v: np.ndarray, u0: float, d: float, big_f: float, f: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two read-outs (see :func:`stp_rates`), 0 where a variable is at rest."""
+    rate_r = np.zeros(q.shape)
+    rate_u = np.zeros(v.shape)
+    moved = q > 0
+    if moved.any():
+        q_m = q[moved]
+        rate_r[moved] = _inverse_interval(d, (u0 + v[moved]) * (1.0 - q_m), q_m)  # a = u R, b = 1 - R
+    moved = v > 0
+    if moved.any():
+        v_m = v[moved]
+        rate_u[moved] = _inverse_interval(big_f, f * ((1.0 - u0) - v_m), v_m)  # a = f (1 - u), b = u - u0
+    return rate_r, rate_u
+
+
+def tfstp_state(
+    planes: np.ndarray,
+    key_plane: int,
+    *,
+    u0: float = U0,
+    recovery_planes: float = RECOVERY_PLANES,
+    facilitation_planes: float = FACILITATION_PLANES,
+    facilitation: float = FACILITATION,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The STP states at the key plane, from the spikes of planes ``0 .. key_plane``.
+
+    Parameters
+    ----------
+    planes : ndarray of bool, shape (T, H, W)
+    key_plane : int in [0, T)
+    u0, recovery_planes, facilitation_planes, facilitation : float
+        ``u0``, ``D``, ``F`` and ``f``.
+
+    Returns
+    -------
+    r_deficit, u_excess : float64 (H, W)
+        ``1 - R`` in [0, 1) and ``u - u0`` in [0, 1 - u0); both 0 for pixels with fewer than two
+        spikes.
+    """
+    planes, key_plane = check_spike_window(planes, key_plane)
+    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    n = key_plane + 1
+    h, w = planes.shape[1:]
+    size = h * w
+    flat = planes[:n].reshape(n, size)
+    # Decay factors indexed by the lag in planes. A pixel that has not fired yet holds
+    # last = -(n + 1), so its first spike sees a lag in [n + 1, 2n], where the tables hold 0: the
+    # update then maps the resting state (q = v = 0) onto itself, and the first spike only starts
+    # the clock.
+    lags = np.arange(2 * n + 1, dtype=np.float64)
+    decay_r, decay_u = np.exp(-lags / d), np.exp(-lags / big_f)
+    decay_r[n + 1 :] = 0.0
+    decay_u[n + 1 :] = 0.0
+    last = np.full(size, -(n + 1), dtype=np.int64)  # plane of each pixel's last spike
+    q = np.zeros(size)
+    v = np.zeros(size)
+    # Work buffers, reused plane after plane (fresh large arrays would cost a page fault per page).
+    lag_buf = np.empty(size, dtype=np.int64)
+    q_buf, v_buf, r_buf, u_buf, scratch = (np.empty(size) for _ in range(5))
+    for j in range(n):
+        fired = flat[j]
+        m = np.count_nonzero(fired)
+        if m == 0:
+            continue
+        if m == size:  # every pixel fired: no gathering needed
+            np.subtract(j, last, out=lag_buf)
+            np.take(decay_r, lag_buf, out=r_buf, mode="clip")
+            np.take(decay_u, lag_buf, out=u_buf, mode="clip")
+            _step_inplace(q, v, r_buf, u_buf, u0, f, scratch)
+            last.fill(j)
+            continue
+        idx = np.flatnonzero(fired)
+        lag, q_m, v_m, r_m, u_m = lag_buf[:m], q_buf[:m], v_buf[:m], r_buf[:m], u_buf[:m]
+        np.take(last, idx, out=lag, mode="clip")
+        np.subtract(j, lag, out=lag)
+        np.take(decay_r, lag, out=r_m, mode="clip")
+        np.take(decay_u, lag, out=u_m, mode="clip")
+        np.take(q, idx, out=q_m, mode="clip")
+        np.take(v, idx, out=v_m, mode="clip")
+        _step_inplace(q_m, v_m, r_m, u_m, u0, f, scratch[:m])
+        q[idx] = q_m
+        v[idx] = v_m
+        last[idx] = j
+    return q.reshape(h, w), v.reshape(h, w)
+
+
+def tfstp_rate(
+    planes: np.ndarray,
+    key_plane: int,
+    *,
+    u0: float = U0,
+    recovery_planes: float = RECOVERY_PLANES,
+    facilitation_planes: float = FACILITATION_PLANES,
+    facilitation: float = FACILITATION,
+) -> np.ndarray:
+    """TFSTP's rate estimate at the key plane, from the two read-outs.
+
+    Parameters
+    ----------
+    planes : ndarray of bool, shape (T, H, W)
+    key_plane : int in [0, T)
+    u0, recovery_planes, facilitation_planes, facilitation : float
+        ``u0``, ``D``, ``F`` and ``f``.
+
+    Returns
+    -------
+    ndarray float64 (H, W) >= 0
+        ``(ρ_R + ρ_u) / 2`` in spikes per plane, or the one read-out whose variable is not at rest
+        (after an interval of more than ~745 D planes); 0 for pixels with fewer than two spikes up
+        to the key plane.
+    """
+    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f)
+    rate_r, rate_u = _rates(q, v, u0, d, big_f, f)
+    rate = rate_r + rate_u
+    rate[(rate_r > 0) & (rate_u > 0)] *= 0.5  # the mean where both moved, else the one that did
+    return rate
+
+
+class TFSTP(Method):
+    """Texture from short-term plasticity (see the module docstring).
+
+    Parameters
+    ----------
+    name : str, optional
+    u0 : float
+        Resting utilisation, in (0, 1).
+    recovery_planes : float
+        ``D``, the resources' recovery time constant, in planes.
+    facilitation_planes : float
+        ``F``, the utilisation's decay time constant, in planes.
+    facilitation : float
+        ``f``, the utilisation step per spike, in (0, 1).
+    """
+
+    inputs = frozenset({"spikes"})
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        u0: float = U0,
+        recovery_planes: float = RECOVERY_PLANES,
+        facilitation_planes: float = FACILITATION_PLANES,
+        facilitation: float = FACILITATION,
+    ) -> None:
+        u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+        super().__init__(name, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f)
+        self.u0, self.recovery_planes, self.facilitation_planes, self.facilitation = u0, d, big_f, f
+
+    def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
+        stream = sample.spikes
+        rate = tfstp_rate(
+            stream.planes,
+            sample.key_plane,
+            u0=self.u0,
+            recovery_planes=self.recovery_planes,
+            facilitation_planes=self.facilitation_planes,
+            facilitation=self.facilitation,
+        )
+        return rate_to_image(rate, stream.gain)
+
+
+def register_methods(register) -> None:
+    """Register ``tfstp`` with the published parameters."""
+    register(
+        "tfstp",
+        TFSTP,
+        params={
+            "u0": U0,
+            "recovery_planes": RECOVERY_PLANES,
+            "facilitation_planes": FACILITATION_PLANES,
+            "facilitation": FACILITATION,
+        },
+        description="texture from short-term plasticity (Zheng et al. 2021), exact steady-state read-out",
+    )
