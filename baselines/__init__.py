@@ -23,10 +23,20 @@ _DONE = False
 
 
 def register_all() -> None:
-    """Register the suite's baselines (idempotent)."""
+    """Register the suite's baselines (idempotent).
+
+    Every module is tried; if some fail to import or register, the others still register and
+    one error naming all failures is raised afterwards.
+    """
     global _DONE
     if _DONE:
         return
     _DONE = True
+    problems = []
     for name in _MODULES:
-        importlib.import_module(name).register_methods(register)
+        try:
+            importlib.import_module(name).register_methods(register)
+        except Exception as exc:
+            problems.append(f"{name}: {type(exc).__name__}: {exc}")
+    if problems:
+        raise ImportError("some baselines could not be registered: " + "; ".join(problems))

@@ -88,7 +88,9 @@ class Sample:
         """Index, within ``spikes``, of the plane containing the key instant."""
         if self.spikes is None:
             raise InputError("Sample has no spikes")
-        j = int(np.floor((self.key_time_s - self.spikes.start_s) * self.spikes.plane_rate_hz))
+        # a key time on a plane boundary belongs to the plane that starts there; the small
+        # tolerance keeps float rounding (k / rate * rate = k - 1e-12) from moving it back
+        j = int(np.floor((self.key_time_s - self.spikes.start_s) * self.spikes.plane_rate_hz + 1e-6))
         return min(max(j, 0), self.spikes.num_planes - 1)
 
     def window_events(self) -> EventStream:
