@@ -209,6 +209,27 @@ class EventStream:
         object.__setattr__(self, "height", height)
 
     @classmethod
+    def trusted(cls, t_s: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int,
+                meta: dict[str, Any] | None = None) -> "EventStream":
+        """Build a stream from arrays whose producer guarantees the invariants (sorted, in range).
+
+        Skips the O(N) value checks of the constructor (a large share of a simulator's time on
+        millions of events); dtypes and lengths are still enforced. Readers of user files must use
+        the validating constructor.
+        """
+        arrays = (np.ascontiguousarray(t_s, dtype=T_DTYPE), np.ascontiguousarray(x, dtype=XY_DTYPE),
+                  np.ascontiguousarray(y, dtype=XY_DTYPE), np.ascontiguousarray(p, dtype=P_DTYPE))
+        if len({a.shape for a in arrays}) != 1 or arrays[0].ndim != 1:
+            raise InputError(f"EventStream.trusted: arrays must be 1-D of equal length, got {[a.shape for a in arrays]}")
+        stream = object.__new__(cls)
+        for name, value in zip(("t_s", "x", "y", "p"), arrays):
+            object.__setattr__(stream, name, value)
+        object.__setattr__(stream, "width", check_positive_int("EventStream.width", width))
+        object.__setattr__(stream, "height", check_positive_int("EventStream.height", height))
+        object.__setattr__(stream, "meta", dict(meta or {}))
+        return stream
+
+    @classmethod
     def empty(cls, width: int, height: int, meta: dict[str, Any] | None = None) -> "EventStream":
         """A stream with no events."""
         z = np.zeros(0)

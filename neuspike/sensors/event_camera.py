@@ -1,0 +1,916 @@
+"""Event camera (DVS) simulator: a v2e-class pixel with exact crossing timestamps.
+
+The camera sees ``intensity = light * radiance`` (radiance 1.0 is the reference white). Each pixel
+works on the log of its intensity (:func:`log_intensity`) and keeps a *memorised level*; it emits an
+ON event each time the log rises a full threshold ``theta_on`` above that level and an OFF event
+each time it falls ``theta_off`` below it, and the memorised level moves by exactly the emitted
+crossings (the remainder is kept).
+
+Time model
+    The very first frame a camera ever receives only initialises it (memorised level = that frame's
+    log intensity; no events, as in v2e). Between two consecutive samples the log intensity is
+    interpolated *linearly in time*, and every crossing gets its own timestamp where the line meets
+    the crossing level (ESIM's model; no v2e "pyramids" of evenly spread events). Crossing times
+    are computed in float64 from the float32 pixel state and resolved to ``2**-44`` of the sample
+    interval (``2**-(62 - b)`` for sensors whose key needs ``b > 18`` bits) or two float64 ulps of
+    the timestamp, whichever is coarser: far below a picosecond at 22,500 frames/s. Timestamps
+    are float64 seconds. A later call continues from the previous call's last frame, so a
+    sequence captured in chunks gives exactly the same events as one call (including the random
+    draws of shot noise, which are made per sample interval).
+
+Output order
+    Events are sorted by time; events with equal timestamps are ordered by pixel index
+    ``y * W + x`` (then OFF before ON).
+
+Effect stages (:mod:`neuspike.conditions`, modality ``"events"``). Only declared stages run; an
+undeclared stage executes no code and draws no random numbers.
+
+``threshold_mismatch(sigma)``
+    per-pixel thresholds ``N(theta, sigma**2)`` (ON and OFF drawn independently, ON first), frozen
+    at construction, floored at 0.01.
+``bandwidth(cutoff_hz)``
+    first-order low-pass of the log intensity, updated at every sample with
+    ``eps = min(1, ((I8 + 20) / 275) * dt * 2 pi cutoff_hz)`` where ``I8 = 255 * intensity`` of the
+    new sample (darker pixels are slower); crossings are computed on the filtered log, still
+    interpolated linearly between samples. The filter starts at the first frame's log intensity.
+``leak(rate_hz)``
+    the memorised level drifts down at ``rate_pixel * theta_on_pixel`` per second, giving spurious
+    ON events at about ``rate_hz`` on a static scene; ``rate_pixel = rate_hz * 10**(0.1 N(0, 1))``
+    (log-normal spread of 0.1 decade), frozen at construction.
+``shot_noise(rate_hz)``
+    ON and OFF noise events, each a Poisson process in continuous time with rate
+    ``(R / 2) * (1 - 0.75 * I01) * theta_nominal / theta_pixel``, ``I01 = clip((I8 + 20) / 275, 0, 1)``
+    taken from the interval's end sample (as v2e does). They are drawn by Poisson thinning over each
+    sample interval (never a per-pixel-per-frame coin flip, which is slower and biased at high
+    rates). A noise event resets the pixel's memorised level to its current (filtered) log
+    intensity; crossings after it in the same interval are measured from the new level.
+``refractory(period_s)``
+    a pixel emits no event within ``period_s`` of its previous *emitted* event. As in v2e the
+    suppressed events are dropped, and the pixel's state is not held: its memorised level still
+    moves by the suppressed crossings (and a suppressed noise event still resets it). The period
+    therefore only thins the output; it never delays or merges events.
+
+Presets with v2e's numbers are in :data:`neuspike.conditions.EVENT_PRESETS`.
+
+Implementation
+    Per sample interval every pixel is updated with whole-array float32 operations into
+    preallocated buffers; only the pixels that cross a threshold go further. Each of their
+    crossings becomes an int64 key ``(time fraction << b) | (pixel << 1) | ON`` whose numeric order
+    is the output order, so one in-place sort per interval orders the events and the sorted keys
+    decode straight into ``t``, ``x``, ``y``, ``p`` (x, y, p from lookup tables). The pixel's own
+    log is kept minus the constant ``ln(255 * light)``, which cancels in every difference.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any, Iterable
+
+import numpy as np
+
+from neuspike.checks import check_positive, check_positive_int
+from neuspike.conditions import EVENTS, Effect
+from neuspike.errors import InputError
+from neuspike.streams import EventStream
+
+__all__ = [
+    "DARK_FLOOR_8BIT",
+    "REFERENCE_WHITE_8BIT",
+    "THRESHOLD_FLOOR",
+    "EventCamera",
+    "log_intensity",
+]
+
+#: Intensity of the reference white (radiance 1.0 at light 1) on v2e's 8-bit scale.
+REFERENCE_WHITE_8BIT = 255.0
+#: Below this 8-bit value the log response is linear (v2e's lin-log): 20/255 of reference white.
+DARK_FLOOR_8BIT = 20.0
+#: Smallest per-pixel contrast threshold after mismatch (log units).
+THRESHOLD_FLOOR = 0.01
+#: Log-normal spread of the per-pixel leak rate, in decades (v2e).
+LEAK_SPREAD_DECADES = 0.1
+#: Shot-noise rate at full intensity relative to the dark limit (v2e): rate ~ 1 - 0.75 * I01.
+SHOT_NOISE_BRIGHT_FACTOR = 0.25
+_I01_OFFSET = 20.0
+_I01_SCALE = 275.0
+
+#: Order in which declared stages are listed in a recording's metadata.
+_STAGE_ORDER = ("threshold_mismatch", "bandwidth", "leak", "shot_noise", "refractory")
+_RANDOM_STAGES = ("threshold_mismatch", "leak", "shot_noise")
+
+_LIN_SLOPE = np.float32(np.log(DARK_FLOOR_8BIT) / DARK_FLOOR_8BIT)
+#: Finest resolution of a crossing time, as a power of two of the sample interval.
+_MAX_FRACTION_BITS = 44
+#: Crossing levels handled one by one per interval before switching to a cumulative expansion.
+_MAX_LEVEL_LOOP = 48
+
+
+def _lin_log_into(x: np.ndarray, out: np.ndarray, tmp: np.ndarray, floor: np.float32,
+                  slope: np.float32) -> np.ndarray:
+    """``log(x)`` above ``floor``, ``slope * x`` below it (float32, into ``out``).
+
+    Computed as ``log(max(x, floor)) + (min(x, floor) * slope - log(floor))`` with ``log(floor)``
+    the float32 value of the same ``np.log``, so that ``f(0) == 0`` exactly.
+    """
+    np.maximum(x, floor, out=out)
+    np.log(out, out=out)
+    np.minimum(x, floor, out=tmp)
+    tmp *= slope
+    tmp -= np.log(floor)
+    out += tmp
+    return out
+
+
+def log_intensity(intensity: Any) -> np.ndarray:
+    """The DVS pixel's log response to intensity (v2e's lin-log on the 8-bit scale).
+
+    With ``x = 255 * intensity`` (reference white, intensity 1.0, is 255)::
+
+        f(x) = x * ln(20) / 20   for x <= 20
+        f(x) = ln(x)             for x > 20
+
+    The linear part is the *dark floor*: below 20/255 of reference white the response is linear
+    rather than logarithmic, so a dark pixel needs a much larger relative change to cross a
+    threshold and dark scenes give fewer events (and, with shot noise, relatively more noise).
+    The function is continuous at the floor and ``f(0) = 0``.
+
+    Parameters
+    ----------
+    intensity : array_like of float, any shape
+        Linear intensity, >= 0 (1.0 = reference white; HDR values above 1 are fine).
+
+    Returns
+    -------
+    ndarray of float32, same shape
+        Log intensity in natural-log units.
+
+    Raises
+    ------
+    InputError
+        If ``intensity`` holds NaN, infinity or a negative value.
+    """
+    x = np.asarray(intensity, dtype=np.float32)
+    if x.size:
+        lo, hi = float(np.min(x)), float(np.max(x))
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            raise InputError("log_intensity: expected finite intensities, got NaN or infinity")
+        if lo < 0:
+            raise InputError(f"log_intensity: expected intensities >= 0, got a minimum of {lo!r}")
+    x8 = np.multiply(x, np.float32(REFERENCE_WHITE_8BIT), dtype=np.float32)
+    return _lin_log_into(x8, np.empty_like(x8), np.empty_like(x8), np.float32(DARK_FLOOR_8BIT), _LIN_SLOPE)
+
+
+def _validate_effects(effects: Iterable[Effect]) -> dict[str, Effect]:
+    if isinstance(effects, Effect):
+        effects = (effects,)
+    try:
+        items = tuple(effects)
+    except TypeError:
+        raise InputError(f"effects: expected a sequence of Effect objects, got {effects!r}") from None
+    by_name: dict[str, Effect] = {}
+    for e in items:
+        if not isinstance(e, Effect):
+            raise InputError(f"effects: expected Effect objects (neuspike.conditions.effect), got {e!r}")
+        if e.modality != EVENTS:
+            raise InputError(
+                f"effects: {e.name!r} is a {e.modality} effect; the event camera takes only "
+                f"{', '.join(_STAGE_ORDER)}"
+            )
+        if e.name in by_name:
+            raise InputError(f"effects: {e.name!r} is declared twice")
+        by_name[e.name] = e
+    return by_name
+
+
+def _stream_from_valid_arrays(t, x, y, p, width, height, meta) -> EventStream:
+    """An :class:`EventStream` from arrays the simulator guarantees valid (sorted, in range)."""
+    return EventStream.trusted(t, x, y, p, width, height, meta)
+
+
+class EventCamera:
+    """A DVS event camera with explicit pixel state (see the module docstring for the model).
+
+    Parameters
+    ----------
+    width, height : int
+        Sensor size W, H in pixels.
+    light : float
+        Light scale L > 0: the camera sees ``intensity = light * radiance``.
+    threshold_on, threshold_off : float
+        Nominal ON and OFF contrast thresholds in natural-log units (v2e: 0.2).
+    effects : sequence of Effect
+        Declared event-camera stages (``threshold_mismatch``, ``bandwidth``, ``leak``,
+        ``shot_noise``, ``refractory``), each at most once. Any other effect raises.
+    rng : numpy.random.Generator or None
+        Source of every random draw: frozen per-pixel parameters are drawn here at construction
+        (mismatch, then leak rates) and shot noise is drawn from it during :meth:`capture`, one
+        batch per sample interval. Required when a random stage (``threshold_mismatch``, ``leak``,
+        ``shot_noise``) is declared; never touched otherwise.
+    threads : int, optional
+        ``2`` sorts and writes each interval's events in a worker thread while the pixels of the
+        next interval are updated (same output, byte for byte). It pays only when a second core
+        is idle; the default is ``1``.
+
+    Notes
+    -----
+    State that persists between :meth:`capture` calls: the time of the last sample, the (filtered)
+    log intensity and memorised level of every pixel, and, with ``refractory``, the time of each
+    pixel's last emitted event. :meth:`reset` forgets it; the frozen per-pixel parameters stay.
+    """
+
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        *,
+        light: float,
+        threshold_on: float = 0.2,
+        threshold_off: float = 0.2,
+        effects: Iterable[Effect] = (),
+        rng: np.random.Generator | None = None,
+        threads: int | None = None,
+    ) -> None:
+        self.threads = check_positive_int("EventCamera threads", 1 if threads is None else threads)
+        self.width = check_positive_int("EventCamera width", width)
+        self.height = check_positive_int("EventCamera height", height)
+        self.light = check_positive("EventCamera light", light)
+        self.threshold_on = check_positive("threshold_on", threshold_on)
+        self.threshold_off = check_positive("threshold_off", threshold_off)
+        self._effects = _validate_effects(effects)
+        random_stages = [n for n in _RANDOM_STAGES if n in self._effects]
+        if random_stages and not isinstance(rng, np.random.Generator):
+            raise InputError(
+                f"EventCamera: stages {random_stages} draw random numbers and need "
+                f"rng=numpy.random.Generator, got {rng!r}"
+            )
+        self._rng = rng
+        n = self.width * self.height
+        self._n = n
+        # event key layout (int64): [time fraction | pixel index y * W + x | polarity (ON = 1)]
+        self._pix_bits = (2 * n - 1).bit_length()
+        self._fraction_bits = min(_MAX_FRACTION_BITS, 62 - self._pix_bits)
+        if self._fraction_bits < 16:
+            raise InputError(f"EventCamera: sensor {self.width}x{self.height} is too large")
+        self._pix_mask = (1 << self._pix_bits) - 1
+        self._event_lut: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # built on first use
+
+        # Frozen per-pixel parameters, drawn in a fixed order: mismatch (ON, OFF), then leak.
+        self._setup_seconds: dict[str, float] = {}
+        c0 = time.perf_counter()
+        if "threshold_mismatch" in self._effects:
+            sigma = self._effects["threshold_mismatch"].param("sigma")
+            on = rng.normal(self.threshold_on, sigma, n)
+            off = rng.normal(self.threshold_off, sigma, n)
+            self._th_on = np.maximum(on, THRESHOLD_FLOOR).astype(np.float32)
+            self._th_off = np.maximum(off, THRESHOLD_FLOOR).astype(np.float32)
+            self._setup_seconds["threshold_mismatch"] = time.perf_counter() - c0
+        else:
+            self._th_on = np.full(n, self.threshold_on, dtype=np.float32)
+            self._th_off = np.full(n, self.threshold_off, dtype=np.float32)
+        self._symmetric = "threshold_mismatch" not in self._effects and self.threshold_on == self.threshold_off
+        self._neg_th_off = -self._th_off
+        # interleaved [off, on] per pixel: threshold of pixel i for polarity p is _th_pair[2 i + p]
+        self._th_pair = np.stack([self._th_off, self._th_on], axis=1).ravel()
+
+        self._leak_per_s: np.ndarray | None = None
+        if "leak" in self._effects:
+            c0 = time.perf_counter()
+            rate_hz = self._effects["leak"].param("rate_hz")
+            rates = rate_hz * 10.0 ** (LEAK_SPREAD_DECADES * rng.standard_normal(n))
+            self._leak_per_s = (rates * self._th_on).astype(np.float32)
+            self._setup_seconds["leak"] = time.perf_counter() - c0
+
+        if "shot_noise" in self._effects:
+            rate_hz = self._effects["shot_noise"].param("rate_hz")
+            self._noise_gain = np.stack([
+                self.threshold_off / self._th_off.astype(np.float64),
+                self.threshold_on / self._th_on.astype(np.float64),
+            ])  # (2, n): OFF, ON
+            self._noise_half_rate_hz = 0.5 * rate_hz
+            dark = 1.0 - (1.0 - SHOT_NOISE_BRIGHT_FACTOR) * (_I01_OFFSET / _I01_SCALE)
+            # bound of one pixel's total (ON + OFF) noise rate, for thinning
+            self._noise_bound_hz = rate_hz * dark * float(self._noise_gain.max())
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the pixel state (the next frame initialises again); frozen parameters stay."""
+        self._t_last: float | None = None
+        self._sig: np.ndarray | None = None
+        self._mem: np.ndarray | None = None
+        self._last_emit_s: np.ndarray | None = None
+
+    def _luts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y (uint16) and polarity (int8) of each event key ``2 * pixel + ON``."""
+        if self._event_lut is None:
+            key = np.arange(2 * self._n)
+            pix = key >> 1
+            self._event_lut = (
+                (pix % self.width).astype(np.uint16),
+                (pix // self.width).astype(np.uint16),
+                np.where(key & 1, 1, -1).astype(np.int8),
+            )
+        return self._event_lut
+
+    @property
+    def initialised(self) -> bool:
+        """Whether the camera has received its first frame."""
+        return self._t_last is not None
+
+    @property
+    def last_time_s(self) -> float | None:
+        """Time of the last sample received, or ``None`` before the first."""
+        return self._t_last
+
+    @property
+    def effects(self) -> tuple[Effect, ...]:
+        """The declared stages."""
+        return tuple(self._effects.values())
+
+    @property
+    def theta_on(self) -> np.ndarray:
+        """Per-pixel ON thresholds in use, float32 (H, W) (a copy)."""
+        return self._th_on.reshape(self.height, self.width).copy()
+
+    @property
+    def theta_off(self) -> np.ndarray:
+        """Per-pixel OFF thresholds in use, float32 (H, W) (a copy)."""
+        return self._th_off.reshape(self.height, self.width).copy()
+
+    # ---------------------------------------------------------------- capture
+    def _check_inputs(self, radiance_frames: Any, times_s: Any) -> tuple[np.ndarray, np.ndarray, float]:
+        frames = np.asarray(radiance_frames)
+        if frames.ndim != 3:
+            raise InputError(f"radiance_frames: expected shape (K, H, W), got {frames.shape}")
+        if frames.shape[1:] != (self.height, self.width):
+            raise InputError(
+                f"radiance_frames: expected frames of H x W = {self.height} x {self.width}, "
+                f"got {frames.shape[1]} x {frames.shape[2]}"
+            )
+        if not (np.issubdtype(frames.dtype, np.floating) or np.issubdtype(frames.dtype, np.integer)):
+            raise InputError(f"radiance_frames: expected a float array, got dtype {frames.dtype}")
+        if frames.shape[0] == 0:
+            raise InputError("radiance_frames: expected at least one frame, got 0")
+        frames = np.ascontiguousarray(frames, dtype=np.float32)
+        times = np.asarray(times_s, dtype=np.float64)
+        if times.shape != (frames.shape[0],):
+            raise InputError(
+                f"times_s: expected shape ({frames.shape[0]},) matching the frames, got {times.shape}"
+            )
+        if not np.isfinite(times).all():
+            raise InputError("times_s: expected finite times, found NaN or infinity")
+        if times.shape[0] > 1:
+            steps = np.diff(times)
+            if not (steps > 0).all():
+                k = int(np.argmax(steps <= 0)) + 1
+                raise InputError(
+                    f"times_s: expected strictly increasing times; sample {k} at {times[k]!r} s does "
+                    f"not follow sample {k - 1} at {times[k - 1]!r} s"
+                )
+        if self._t_last is not None and not times[0] > self._t_last:
+            raise InputError(
+                f"times_s: the first sample at {times[0]!r} s must follow the previous capture's "
+                f"last sample at {self._t_last!r} s"
+            )
+        lo, hi = float(frames.min()), float(frames.max())
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            raise InputError("radiance_frames: expected finite radiance, found NaN or infinity")
+        if lo < 0:
+            raise InputError(f"radiance_frames: expected radiance >= 0, got a minimum of {lo!r}")
+        return frames, times, hi
+
+    def capture(self, radiance_frames: Any, times_s: Any) -> EventStream:
+        """Events produced while the camera watches ``radiance_frames``.
+
+        Parameters
+        ----------
+        radiance_frames : ndarray, shape (K, H, W), float32
+            Linear radiance samples, >= 0 (1.0 = reference white).
+        times_s : ndarray, shape (K,), float64
+            Sample times in seconds, strictly increasing and after the previous call's last sample.
+
+        Returns
+        -------
+        EventStream
+            The events in ``(previous sample, times_s[-1]]`` sorted by time (ties by pixel index),
+            with ``meta = {"stages": [{"name", "params", "seconds"}, ...], "event_count": N}``
+            listing the stages that ran (always ``dvs_pixel``, the ideal pixel, first) and the
+            wall time charged to each; the frozen draws of ``threshold_mismatch`` and ``leak``
+            (made at construction) are charged to the capture that initialises the camera.
+
+        Raises
+        ------
+        InputError
+            For a wrong shape, NaN, infinite or negative radiance, or times that do not increase.
+            A rejected call leaves the camera's state unchanged.
+        """
+        frames, times, max_radiance = self._check_inputs(radiance_frames, times_s)
+        run = _Capture(self, max_radiance, self.threads)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            run.run(frames.reshape(frames.shape[0], self._n), times)
+        return run.result()
+
+
+class _EventBuffer:
+    """Output arrays (t, x, y, p) filled interval by interval.
+
+    Capacity is reserved at twice the count projected from the running event rate: ``np.empty``
+    touches no memory, so the slack costs only address space, while growing (a copy of everything
+    so far into fresh memory) is expensive. The arrays are trimmed in place at the end.
+    """
+
+    def __init__(self, intervals: int) -> None:
+        self.intervals = max(intervals, 1)
+        self.done = 0
+        self.size = 0
+        self.arrays = [np.empty(0, np.float64), np.empty(0, np.uint16), np.empty(0, np.uint16),
+                       np.empty(0, np.int8)]
+
+    def would_grow(self, count: int) -> bool:
+        return self.size + count > self.arrays[0].shape[0]
+
+    def extend(self, count: int) -> list[np.ndarray]:
+        """Views of the next ``count`` slots of each array."""
+        self.done += 1
+        need = self.size + count
+        if need > self.arrays[0].shape[0]:
+            expected = need * self.intervals / self.done
+            capacity = int(max(min(2.0 * expected, need + max(need, 1 << 25)), 2 * need, 1 << 16))
+            grown = []
+            for a in self.arrays:
+                b = np.empty(capacity, a.dtype)
+                b[:self.size] = a[:self.size]
+                grown.append(b)
+            self.arrays = grown
+        start, self.size = self.size, need
+        return [a[start:need] for a in self.arrays]
+
+    def finish(self) -> list[np.ndarray]:
+        for i, a in enumerate(self.arrays):
+            if a.shape[0] != self.size:
+                try:
+                    a.resize(self.size, refcheck=False)  # shrinking: no copy
+                except ValueError:
+                    self.arrays[i] = a[:self.size].copy()
+        return self.arrays
+
+
+class _Capture:
+    """The work of one :meth:`EventCamera.capture` call.
+
+    Pixel state: ``sig`` (the log intensity the pixel sees, low-pass filtered with ``bandwidth``)
+    and ``mem`` (the memorised level). Per sample interval: update ``sig`` and ``mem`` (leak), find
+    the pixels whose ``sig - mem`` crosses a threshold and how often, then build the interval's
+    events as int64 keys ``(time fraction << P) | (pixel << 1) | ON``, sort them and append them to
+    the output. Sorting the keys orders events by time, then pixel index.
+    """
+
+    def __init__(self, cam: EventCamera, max_radiance: float, threads: int) -> None:
+        self.cam = cam
+        self.threads = threads
+        self.pool: ThreadPoolExecutor | None = None
+        self.pending: list[Future] = []
+        eff = cam._effects
+        self.bandwidth_hz = eff["bandwidth"].param("cutoff_hz") if "bandwidth" in eff else None
+        self.refractory_s = eff["refractory"].param("period_s") if "refractory" in eff else None
+        self.shot_noise = "shot_noise" in eff
+        self.leak = cam._leak_per_s
+        self.seconds = dict.fromkeys(["dvs_pixel", *(name for name in _STAGE_ORDER if name in eff)], 0.0)
+        self.stage = "dvs_pixel"
+        self.stage_t0 = time.perf_counter()
+        self.luts = cam._luts()
+        self.max_radiance = max_radiance
+        n = cam._n
+        self.tmp = np.empty(n, np.float32)
+        self.d1 = np.empty(n, np.float32)
+        self.act = np.empty(n, np.bool_)
+        self.act2 = np.empty(n, np.bool_)
+        # internal log: v2e's lin-log of 255 * light * radiance minus the constant ln(255 * light)
+        # (only differences of the log matter), so the radiance needs no scaling per frame
+        self.scale8 = cam.light * REFERENCE_WHITE_8BIT
+        self.floor = np.float32(DARK_FLOOR_8BIT / self.scale8)
+        self.slope = np.float32(np.log(DARK_FLOOR_8BIT) / (DARK_FLOOR_8BIT / self.scale8))
+
+    def switch(self, stage: str) -> str:
+        """Charge the time since the last switch to the current stage; return that stage."""
+        now = time.perf_counter()
+        self.seconds[self.stage] += now - self.stage_t0
+        self.stage_t0 = now
+        previous, self.stage = self.stage, stage
+        return previous
+
+    def log_into(self, radiance: np.ndarray, out: np.ndarray) -> np.ndarray:
+        return _lin_log_into(radiance, out, self.tmp, self.floor, self.slope)
+
+    # ------------------------------------------------------------------ loop
+    def run(self, frames: np.ndarray, times: np.ndarray) -> None:
+        cam = self.cam
+        n = cam._n
+        if cam._t_last is None:
+            sig = self.log_into(frames[0], np.empty(n, np.float32))
+            mem = sig.copy()
+            last_emit = np.full(n, -np.inf) if self.refractory_s is not None else None
+            t_prev = float(times[0])
+            k0 = 1
+            for name in ("threshold_mismatch", "leak"):
+                if name in self.seconds:  # the frozen per-pixel draws made at construction
+                    self.seconds[name] += cam._setup_seconds.get(name, 0.0)
+        else:
+            # work on copies: the camera's state changes only when the call completes
+            sig = cam._sig.copy()
+            mem = cam._mem.copy()
+            last_emit = None if cam._last_emit_s is None else cam._last_emit_s.copy()
+            t_prev = cam._t_last
+            k0 = 0
+        self.last_emit = last_emit
+        self.out = _EventBuffer(frames.shape[0] - k0)
+        if self.threads > 1 and frames.shape[0] - k0 > 1:
+            self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="neuspike-events")
+        try:
+            self.loop(frames, times, k0, sig, mem, t_prev)
+            self.drain()
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown(wait=True, cancel_futures=True)
+                self.pool = None
+        cam._sig, cam._mem, cam._t_last = self.final_state
+        cam._last_emit_s = last_emit
+
+    def loop(self, frames, times, k0, sig, mem, t_prev) -> None:
+        cam = self.cam
+        spare = np.empty(cam._n, np.float32)
+        tmp, d1 = self.tmp, self.d1
+        for k in range(k0, frames.shape[0]):
+            t_k = float(times[k])
+            dt = t_k - t_prev
+            radiance = frames[k]
+            if self.bandwidth_hz is not None:
+                log_k = self.log_into(radiance, d1)
+                self.switch("bandwidth")
+                # eps = min(1, (I8 + 20) / 275 * dt * 2 pi f); sig_new = sig + eps * (log - sig)
+                a = dt * 2.0 * np.pi * self.bandwidth_hz / _I01_SCALE
+                eps = np.multiply(radiance, np.float32(self.scale8 * a), out=spare)
+                eps += np.float32(_I01_OFFSET * a)
+                if (self.max_radiance * self.scale8 + _I01_OFFSET) * a > 1.0:
+                    np.minimum(eps, np.float32(1.0), out=eps)
+                log_k -= sig
+                log_k *= eps
+                sig_new = np.add(sig, log_k, out=spare)
+                self.switch("dvs_pixel")
+            else:
+                sig_new = self.log_into(radiance, spare)
+            if self.leak is not None:
+                self.switch("leak")
+                np.multiply(self.leak, np.float32(dt), out=tmp)
+                mem -= tmp
+                self.switch("dvs_pixel")
+            np.subtract(sig_new, mem, out=d1)
+            noise = None
+            if self.shot_noise:
+                self.switch("shot_noise")
+                noise = self.draw_shot_noise(radiance, dt)
+                if noise is not None:
+                    noise = self.noise_pixels(noise, sig, mem, dt)
+                self.switch("dvs_pixel")
+            self.interval(sig, mem, t_prev, dt, noise)
+            sig, spare = sig_new, sig
+            t_prev = t_k
+        self.final_state = sig, mem, t_prev
+
+    # ------------------------------------------------------------------ noise
+    def draw_shot_noise(self, radiance: np.ndarray, dt: float):
+        """Noise events of one interval by Poisson thinning: (pixel, fraction, ON) or None."""
+        cam = self.cam
+        rng = cam._rng
+        n = cam._n
+        count = int(rng.poisson(cam._noise_bound_hz * n * dt))
+        if count == 0:
+            return None
+        u = rng.random((3, count))
+        pix = np.minimum((u[0] * n).astype(np.int64), n - 1)
+        i01 = radiance[pix].astype(np.float64)
+        i01 *= self.scale8
+        i01 += _I01_OFFSET
+        i01 /= _I01_SCALE
+        np.clip(i01, 0.0, 1.0, out=i01)
+        base = cam._noise_half_rate_hz * (1.0 - (1.0 - SHOT_NOISE_BRIGHT_FACTOR) * i01)
+        rate_on = base * cam._noise_gain[1, pix]
+        level = u[2] * cam._noise_bound_hz
+        keep = level < rate_on + base * cam._noise_gain[0, pix]
+        if not keep.any():
+            return None
+        return pix[keep], u[1][keep], (level < rate_on)[keep]
+
+    def noise_pixels(self, noise, sig: np.ndarray, mem: np.ndarray, dt: float):
+        """All events of the pixels that have a noise event in this interval.
+
+        A noise event resets the memorised level to the current signal, so each segment between
+        noise events starts from a known level: the first from the pixel's state, the others
+        from zero. Returns ``(pixels, events)`` with the events ``(pixel, fraction, ON)`` sorted by
+        pixel then time, and sets those pixels' memorised level at the end of the interval.
+        """
+        cam = self.cam
+        pix_n, f_n, on_n = noise
+        order = np.argsort(pix_n + f_n)  # pixel, then time (f_n < 1)
+        pix_n, f_n, on_n = pix_n[order], f_n[order], on_n[order]
+        m = pix_n.size
+        first = np.empty(m, np.bool_)
+        first[0] = True
+        np.not_equal(pix_n[1:], pix_n[:-1], out=first[1:])
+        pixels = pix_n[first]
+        # leak moves mem linearly in time, so d = sig - mem is linear over the interval
+        mem_end = mem[pixels]
+        mem_start = mem_end.astype(np.float64)
+        if self.leak is not None:
+            mem_start += self.leak[pixels] * dt
+        d1 = self.d1[pixels]
+        d_start = sig[pixels] - mem_start
+        slope = d1 - d_start
+        # segments: one ending at each noise event, and a final one after the pixel's last
+        u = pixels.size
+        seg = np.empty(m + u, np.int64)  # segment -> index into pixels
+        seg[:m] = np.cumsum(first) - 1
+        seg[m:] = np.arange(u)
+        f_a = np.empty(m + u)
+        f_a[0] = 0.0
+        f_a[1:m] = f_n[:-1]
+        f_a[:m][first] = 0.0
+        f_a[m:-1] = f_n[:-1][first[1:]]
+        f_a[-1] = f_n[-1]
+        f_b = np.ones(m + u)
+        f_b[:m] = f_n
+        d_a = np.zeros(m + u)
+        d_a[:m][first] = d_start
+        g = slope[seg]
+        d_b = d_a + g * (f_b - f_a)
+        rising = d_b > 0
+        seg_pix = pixels[seg]
+        th = np.where(rising, cam._th_on[seg_pix], cam._th_off[seg_pix]).astype(np.float64)
+        s = np.trunc(d_b / th)
+        c = np.abs(s).astype(np.int64)
+        total = int(c.sum())
+        ev_pix = np.empty(total + m, np.int64)
+        ev_f = np.empty(total + m)
+        ev_on = np.empty(total + m, np.bool_)
+        if total:
+            rep = np.repeat(np.arange(m + u), c)
+            j = np.arange(1, total + 1) - (np.cumsum(c) - c)[rep]
+            level = np.where(rising[rep], th[rep], -th[rep]) * j
+            ev_f[:total] = f_a[rep] + (level - d_a[rep]) / g[rep]
+            ev_pix[:total] = seg_pix[rep]
+            ev_on[:total] = rising[rep]
+        ev_pix[total:] = pix_n
+        ev_f[total:] = f_n
+        ev_on[total:] = on_n
+        np.clip(ev_f, 0.0, 1.0, out=ev_f)
+        # new memorised level = sig_new - d_end, with sig_new = d1 + mem_end
+        d_end = d_b[m:] - s[m:] * th[m:]
+        mem[pixels] = (mem_end + d1) - d_end.astype(np.float32)
+        order = np.argsort(ev_pix + ev_f * 0.5, kind="stable")  # pixel, then time
+        return pixels, (ev_pix[order], ev_f[order], ev_on[order])
+
+    # ------------------------------------------------------------------ events
+    def interval(self, sig: np.ndarray, mem: np.ndarray, t_a: float, dt: float, noise) -> None:
+        """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel."""
+        cam = self.cam
+        d1, act = self.d1, self.act
+        P = cam._pix_bits
+        # crossing fractions in units of 2**-q_bits of the interval: 2**-44, or coarser where two
+        # float64 ulps of the timestamp are coarser (then distinct fractions stay distinct times)
+        t_max = max(abs(t_a), abs(t_a + dt))
+        q_bits = min(cam._fraction_bits, int(math.floor(math.log2(dt / (2.0 * math.ulp(t_max))))))
+        q_one = float(2 ** max(q_bits, 0))
+        if cam._symmetric:
+            np.abs(d1, out=self.tmp)
+            np.greater_equal(self.tmp, cam._th_on[0], out=act)
+        else:
+            np.greater_equal(d1, cam._th_on, out=act)
+            np.less_equal(d1, cam._neg_th_off, out=self.act2)
+            np.logical_or(act, self.act2, out=act)
+        if noise is not None:
+            act[noise[0]] = False  # these pixels' events come from noise_pixels
+        nz = np.flatnonzero(act)
+        parts = []
+        if nz.size:
+            parts.append(self.crossing_keys(nz, sig, mem, t_a, dt, q_one))
+        if noise is not None:
+            self.switch("shot_noise")
+            parts.append(self.noise_keys(noise[1], t_a, dt, q_one))
+            self.switch("dvs_pixel")
+        if not parts:
+            return
+        keys = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        if keys.size == 0:
+            return
+        if self.out.would_grow(keys.size):
+            self.drain()  # no write may be pending into arrays about to be replaced
+        outputs = self.out.extend(keys.size)
+        if self.pool is None:
+            self.write_events(keys, t_a, dt / q_one, outputs)
+        else:
+            self.pending.append(self.pool.submit(self.write_events, keys, t_a, dt / q_one, outputs))
+
+    def write_events(self, keys: np.ndarray, t_a: float, scale: float, outputs: list[np.ndarray]) -> None:
+        """Sort one interval's keys and write the events into their slots of the output."""
+        t, x, y, p = outputs
+        keys.sort()
+        pix_pol = keys & self.cam._pix_mask
+        for table, out in zip(self.luts, (x, y, p)):
+            np.take(table, pix_pol, out=out, mode="clip")
+        keys >>= self.cam._pix_bits
+        np.multiply(keys, scale, out=t)
+        t += t_a
+
+    def drain(self) -> None:
+        """Wait for the pending writes (and raise their errors)."""
+        pending, self.pending = self.pending, []
+        for job in pending:
+            job.result()
+
+    def crossing_keys(self, nz, sig, mem, t_a, dt, q_one) -> np.ndarray:
+        """Keys of the threshold crossings of the pixels ``nz``; moves their memorised level."""
+        cam = self.cam
+        d1a = self.d1[nz]
+        on = d1a > 0
+        pix_on = nz << 1
+        pix_on |= on  # the key's low bits, and the index into _th_pair
+        th = cam._th_on[0] if cam._symmetric else cam._th_pair[pix_on]
+        s = d1a / th
+        np.trunc(s, out=s)
+        mem_a = mem[nz]
+        mem[nz] = mem_a + s * th
+        # d = sig - mem at the interval start, in float64 (leak moved mem by leak * dt)
+        if self.leak is not None:
+            mem_a = mem_a + self.leak[nz] * np.float32(dt)
+        d0 = np.subtract(sig[nz], mem_a, dtype=np.float64)
+        # the first crossing is at fraction (sign * theta - d0) / (d1 - d0), the next ones follow
+        # every theta / |d1 - d0|; in units of 2**-q_bits
+        inv = np.subtract(d1a, d0)
+        np.divide(q_one, inv, out=inv)
+        f1 = np.subtract(np.copysign(th, d1a), d0, out=d0)
+        f1 *= inv
+        counts = np.abs(s, out=s)
+        c_max = int(counts.max())
+        # d1 == d0 meets a crossing pixel only through float32 rounding at a threshold; the
+        # clamps (fmin/fmax drop NaN) keep such a crossing inside the interval
+        if c_max > 1:
+            step = np.abs(inv, out=inv)
+            step *= th  # infinite only where d1 == d0, i.e. for single crossings
+            np.fmin(f1, q_one - (counts - 1) * step, out=f1)
+        else:
+            np.fmin(f1, q_one, out=f1)
+        np.fmax(f1, 0.0, out=f1)
+        k1 = f1.astype(np.int64)
+        k1 <<= cam._pix_bits
+        k1 |= pix_on
+        if self.last_emit is not None and dt < self.refractory_s:
+            return self.refractory_short(k1, step if c_max > 1 else None, counts, nz, t_a, dt, q_one)
+        if self.last_emit is not None:
+            level0, _ = self.refractory(k1, nz, t_a, dt, q_one)
+        else:
+            level0 = k1
+        if c_max == 1:
+            return level0
+        return self.more_levels(level0, k1, step, counts, c_max, nz, t_a, dt, q_one)
+
+    def refractory_short(self, k1, step, counts, nz, t_a, dt, q_one) -> np.ndarray:
+        """Refractory filter for an interval shorter than the period.
+
+        Each pixel can then emit at most one event in the interval: its first crossing at least
+        ``period_s`` after its last emitted event. Crossing ``j`` of pixel ``i`` is at
+        ``t_a + (q1[i] + j * qstep[i]) * dt / q_one``; ``j`` is found in closed form and then
+        settled with the same float64 comparison as :meth:`refractory`.
+        """
+        outer = self.switch("refractory")
+        P = self.cam._pix_bits
+        scale = dt / q_one
+        period = self.refractory_s
+        last = self.last_emit[nz]
+        q1 = k1 >> P
+        t = q1.astype(np.float64)
+        t *= scale
+        t += t_a
+        ok = (t - last) >= period
+        if step is None:  # one crossing per pixel
+            emit = np.flatnonzero(ok)
+            keys = k1[emit]
+        else:
+            late = np.flatnonzero(~ok & (counts > 1))  # pixels whose first crossing is too early
+            emit = [np.flatnonzero(ok)]
+            keys = [k1[emit[0]]]
+            if late.size:
+                qstep = step[late].astype(np.int64)
+                q1l, lastl, cl = q1[late], last[late], counts[late].astype(np.int64)
+                j = np.ceil(((lastl + period - t_a) / scale - q1l) / qstep)
+                j = np.clip(j, 1, cl).astype(np.int64)
+                q = q1l + j * qstep
+                tl = q.astype(np.float64) * scale + t_a
+                for _ in range(2):  # settle rounding of the closed form: forward, then back
+                    early = (j < cl) & ((tl - lastl) < period)
+                    j += early
+                    back = (j > 1) & ((((q1l + (j - 1) * qstep) * scale + t_a) - lastl) >= period)
+                    j -= back
+                    q = q1l + j * qstep
+                    tl = q.astype(np.float64) * scale + t_a
+                sel = np.flatnonzero((j < cl) & ((tl - lastl) >= period))
+                emit.append(late[sel])
+                keys.append(k1[late[sel]] + ((j[sel] * qstep[sel]) << P))
+                t[late[sel]] = tl[sel]
+            emit = np.concatenate(emit)
+            keys = np.concatenate(keys)
+        self.last_emit[nz[emit]] = t[emit]
+        self.switch(outer)
+        return keys
+
+    def more_levels(self, level0, k1, step, counts, c_max, nz, t_a, dt, q_one) -> np.ndarray:
+        """Append the 2nd, 3rd, ... crossings: pixel i's j-th has key ``k1[i] + j * kstep[i]``."""
+        multi = np.flatnonzero(counts > 1)
+        c_multi = counts[multi].astype(np.int64)
+        n_events = level0.size + int(c_multi.sum()) - multi.size
+        refractory = self.last_emit is not None
+        if c_max > _MAX_LEVEL_LOOP and not refractory:
+            # many levels: expand all at once with a cumulative sum
+            kstep = step[multi].astype(np.int64)
+            kstep <<= self.cam._pix_bits
+            c = c_multi - 1
+            more = np.repeat(kstep, c)
+            start = k1[multi] + kstep
+            first = start.copy()
+            first[1:] -= (start + (c - 1) * kstep)[:-1]
+            more[np.cumsum(c) - c] = first
+            np.cumsum(more, out=more)
+            return np.concatenate([level0, more])
+        # level by level, pixels with more crossings first so that level j is a prefix
+        key_dtype = np.uint8 if c_max < 256 else (np.uint16 if c_max < 65536 else np.int64)
+        order = multi[np.argsort((c_max - c_multi).astype(key_dtype), kind="stable")]
+        kstep = step[order].astype(np.int64)
+        kstep <<= self.cam._pix_bits
+        cur = k1[order]
+        cur += kstep
+        pix = nz[order] if refractory else None
+        n_more = multi.size - np.cumsum(np.bincount(c_multi, minlength=c_max + 1))
+        keys = np.empty(n_events, np.int64)
+        keys[:level0.size] = level0
+        at = level0.size
+        for j in range(1, c_max):
+            m = int(n_more[j])
+            level = cur[:m]
+            if refractory:
+                level, _ = self.refractory(level, pix[:m], t_a, dt, q_one)
+            keys[at:at + level.size] = level
+            at += level.size
+            if j + 1 < c_max:
+                m2 = int(n_more[j + 1])
+                cur[:m2] += kstep[:m2]
+        return keys[:at]
+
+    def noise_keys(self, events, t_a, dt, q_one) -> np.ndarray:
+        pix_e, f_e, on_e = events
+        keys = np.rint(f_e * q_one).astype(np.int64)
+        keys <<= self.cam._pix_bits
+        keys |= pix_e << 1
+        keys |= on_e
+        if self.last_emit is None:
+            return keys
+        rank = np.arange(pix_e.size) - np.searchsorted(pix_e, pix_e, side="left")
+        kept = []
+        for j in range(int(rank.max()) + 1):
+            sel = np.flatnonzero(rank == j)
+            k_j, _ = self.refractory(keys[sel], pix_e[sel], t_a, dt, q_one)
+            kept.append(k_j)
+        return np.concatenate(kept)
+
+    def refractory(self, keys, pix, t_a, dt, q_one):
+        """Drop events within the refractory period of their pixel's last emitted event.
+
+        ``pix`` holds each pixel at most once, and the pixels' earlier events have been seen.
+        """
+        outer = self.switch("refractory")
+        t = (keys >> self.cam._pix_bits).astype(np.float64)
+        t *= dt / q_one
+        t += t_a
+        last_emit = self.last_emit
+        keep = (t - last_emit[pix]) >= self.refractory_s
+        if not keep.all():
+            keys, pix, t = keys[keep], pix[keep], t[keep]
+        last_emit[pix] = t
+        self.switch(outer)
+        return keys, pix
+
+    # ------------------------------------------------------------------ output
+    def result(self) -> EventStream:
+        cam = self.cam
+        t, x, y, p = self.out.finish()
+        self.switch("dvs_pixel")
+        stages = []
+        for name, seconds in self.seconds.items():
+            if name == "dvs_pixel":
+                params = {"light": cam.light, "threshold_on": cam.threshold_on,
+                          "threshold_off": cam.threshold_off}
+            else:
+                params = dict(cam._effects[name].params)
+            stages.append({"name": name, "params": params, "seconds": seconds})
+        meta = {"stages": stages, "event_count": int(t.shape[0])}
+        return _stream_from_valid_arrays(t, x, y, p, cam.width, cam.height, meta)
