@@ -1,0 +1,378 @@
+"""Running one cell: simulate once, reconstruct with every method, score, return tidy rows.
+
+:func:`run_cell` is what every executor runs, in the main process or in a worker. It takes a
+:class:`CellTask` (plain, picklable data) and returns a :class:`CellResult`; it never raises for a
+method's or the simulator's failure: those become rows with ``status="error"`` and the exception in
+``error``. A method that cannot run here (:class:`neuspike.methods.MethodUnavailable`, e.g. learned
+weights not given) becomes rows with ``status="skipped"`` and the reason; a skip is not a failure.
+
+In each cell
+------------
+1. The recording is simulated once, with only the modalities the sweep's methods consume, plus
+   ``history_s`` seconds of event history when a recurrent method needs warm-up, and cached on disk
+   (:mod:`bench.cache`). Its random draws come from
+   ``derive_rng(seed, "cell", scene_spec, condition)``: same seed, same bytes.
+2. Every method reconstructs from that same recording, given without its ground truth. Before the
+   timed call, a method's first use in a process is one untimed call on the same sample, so one-off
+   costs (lazy imports, thread pools, first-call allocation) stay out of the timing. ``reset()``
+   runs before every call, so results do not depend on call history.
+3. The image is scored with :func:`neuspike.metrics.evaluate` (``data_range=1``) against the ground
+   truth clipped to [0, 1].
+
+Worker set-up (:class:`WorkerSetup`, applied once per process and idempotent): plug-in modules are
+imported (:func:`load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable),
+``NEUSPIKE_WEIGHTS`` is set from the sweep's weights folder, and torch's intra-op thread count is set.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import json
+import os
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.cache import RecordingCache, recording_key
+from bench.grid import Cell
+from bench.results import ERROR, OK, SKIPPED, base_row
+from neuspike.errors import InputError
+from neuspike.metrics import FULL_REFERENCE_METRICS
+
+#: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
+PLUGINS_ENV = "NEUSPIKE_PLUGINS"
+#: Environment variable the learned methods read their weights folder from.
+WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
+#: The metrics of every row, in the order rows are produced.
+METRICS: tuple[str, ...] = tuple(FULL_REFERENCE_METRICS)
+DATA_RANGE = 1.0
+
+
+@dataclass(frozen=True)
+class WorkerSetup:
+    """What each worker process needs before it runs a cell.
+
+    Parameters
+    ----------
+    plugins : tuple of str
+        Modules (dotted names or paths to ``.py`` files) to import; each registers its methods
+        with :func:`neuspike.methods.register` when imported.
+    weights : str or None
+        Folder of learned weights; exported as ``NEUSPIKE_WEIGHTS``.
+    threads : int or None
+        torch intra-op threads per worker (``None`` leaves torch's default).
+    """
+
+    plugins: tuple[str, ...] = ()
+    weights: str | None = None
+    threads: int | None = None
+
+
+@dataclass(frozen=True)
+class CellTask:
+    """One cell to run: the cell, the sensor, the methods and where to cache the recording."""
+
+    cell_id: str
+    cell: Cell
+    sensor: Any  # neuspike.simulate.SensorConfig
+    methods: tuple[str, ...]
+    modalities: tuple[str, ...]
+    history_s: float = 0.0
+    cache_dir: str | None = None
+    setup: WorkerSetup = field(default_factory=WorkerSetup)
+    keep_images: bool = False
+
+
+@dataclass
+class CellResult:
+    """What :func:`run_cell` returns.
+
+    ``rows`` are the tidy rows (:mod:`bench.results`); ``status`` is ``"error"`` when any method or
+    the simulation failed; ``failures`` maps a method (or ``"simulation"``) to its traceback;
+    ``skipped`` maps a method to the reason it could not run; ``cache_hit`` says whether the
+    recording came from the cache; ``threads`` is torch's thread count in the worker. With
+    ``task.keep_images``, ``images`` maps ``"gt"`` and each method that succeeded to its float32
+    (H, W) image in [0, 1] (the figure grid of the report).
+    """
+
+    cell_id: str
+    rows: list[dict[str, Any]]
+    status: str
+    cache_hit: bool
+    sim_seconds: float
+    failures: dict[str, str]
+    skipped: dict[str, str]
+    threads: int | None
+    pid: int
+    wall_seconds: float
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------------------------
+# Worker set-up
+# ----------------------------------------------------------------------------------------------
+
+_LOADED_PLUGINS: dict[str, Any] = {}
+#: (name, weights folder) -> [registry entry, instance, warmed-up flag], per process.
+_INSTANCES: dict[tuple[str, str | None], list[Any]] = {}
+
+
+def plugin_names(extra: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """``extra`` followed by the modules in ``NEUSPIKE_PLUGINS``, without repeats."""
+    env = tuple(p.strip() for p in os.environ.get(PLUGINS_ENV, "").split(",") if p.strip())
+    return tuple(dict.fromkeys(extra + env))
+
+
+def load_plugins(plugins: tuple[str, ...]) -> list[str]:
+    """Import each plug-in once per process; return the names newly imported.
+
+    A plug-in is a module that registers methods when imported. It is named by its dotted module
+    name (importable on the worker's ``sys.path``) or by a path to a ``.py`` file.
+
+    Raises
+    ------
+    InputError
+        A plug-in that cannot be found or whose import fails (the message carries the cause).
+    """
+    loaded = []
+    for plugin in plugins:
+        if plugin in _LOADED_PLUGINS:
+            continue
+        try:
+            if plugin.endswith(".py") or os.sep in plugin:
+                path = Path(plugin).resolve()
+                if not path.is_file():
+                    raise InputError(f"plug-in file {plugin!r} does not exist")
+                name = f"neuspike_plugin_{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:8]}"
+                module = sys.modules.get(name)
+                if module is None:
+                    spec = importlib.util.spec_from_file_location(name, path)
+                    module = importlib.util.module_from_spec(spec)
+                    sys.modules[name] = module
+                    try:
+                        spec.loader.exec_module(module)
+                    except BaseException:
+                        del sys.modules[name]
+                        raise
+            else:
+                module = importlib.import_module(plugin)
+        except InputError:
+            raise
+        except Exception as exc:
+            raise InputError(f"plug-in {plugin!r} failed to import: {type(exc).__name__}: {exc}") from exc
+        _LOADED_PLUGINS[plugin] = module
+        loaded.append(plugin)
+    return loaded
+
+
+def forget_plugin(plugin: str) -> None:
+    """Forget that ``plugin`` was imported (tests that unregister its methods use this)."""
+    module = _LOADED_PLUGINS.pop(plugin, None)
+    if module is not None:
+        sys.modules.pop(module.__name__, None)
+
+
+def prepare_worker(setup: WorkerSetup) -> int | None:
+    """Apply ``setup`` in this process (idempotent); return torch's thread count (None without torch)."""
+    if setup.weights is not None:
+        os.environ[WEIGHTS_ENV] = str(setup.weights)
+    load_plugins(plugin_names(setup.plugins))
+    try:
+        import torch
+    except ImportError:  # torch is a dependency; a stripped environment still runs NumPy methods
+        return None
+    if setup.threads is not None and torch.get_num_threads() != setup.threads:
+        torch.set_num_threads(int(setup.threads))
+    return int(torch.get_num_threads())
+
+
+def _method(name: str) -> list[Any]:
+    """``[entry, instance, warmed]`` of ``name`` in this process (re-created when the entry changed)."""
+    from neuspike import methods
+
+    entry = methods.entry(name)
+    key = (name, os.environ.get(WEIGHTS_ENV))
+    cached = _INSTANCES.get(key)
+    if cached is None or cached[0] is not entry:
+        cached = [entry, methods.create(name), False]
+        _INSTANCES[key] = cached
+    return cached
+
+
+# ----------------------------------------------------------------------------------------------
+# Running a cell
+# ----------------------------------------------------------------------------------------------
+
+def one_line(exc: BaseException) -> str:
+    """``Type: message`` on one line (newlines become `` | ``)."""
+    text = f"{type(exc).__name__}: {exc}"
+    return " | ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
+def cell_rng(cell: Cell) -> np.random.Generator:
+    """The generator of every random draw of the cell's simulation."""
+    from neuspike.rng import derive_rng
+
+    return derive_rng(cell.seed, "cell", cell.scene.spec.as_dict(), cell.condition.as_dict())
+
+
+def simulate_cell(task: CellTask) -> tuple[Any, bool]:
+    """The cell's recording, from the cache or simulated (then cached). Returns ``(recording, hit)``."""
+    from neuspike.scenes import make_scene
+    from neuspike.simulate import simulate_window
+
+    cell = task.cell
+    key = recording_key(scene_spec=cell.scene.spec, condition=cell.condition, sensor=task.sensor,
+                        seed=cell.seed, modalities=task.modalities, history_s=task.history_s)
+
+    def simulate():
+        return simulate_window(
+            make_scene(cell.scene.spec), cell.condition, rng=cell_rng(cell), sensor=task.sensor,
+            modalities=set(task.modalities), history_s=task.history_s, seed=cell.seed,
+        )
+
+    return RecordingCache(task.cache_dir).get_or_simulate(key, simulate)
+
+
+def _stage_summary(meta: dict[str, Any]) -> tuple[list[tuple[str, str]], float, str]:
+    """(modality, name) of every stage that ran, total seconds, and seconds per stage as JSON."""
+    stages = list(meta.get("stages", []))
+    names: list[tuple[str, str]] = []
+    seconds: dict[str, float] = {}
+    for s in stages:
+        mod, name = str(s.get("modality", "")), str(s.get("name", ""))
+        if (mod, name) not in names:
+            names.append((mod, name))
+        key = f"{mod}:{name}"
+        seconds[key] = seconds.get(key, 0.0) + float(s.get("seconds", 0.0))
+    return names, float(sum(seconds.values())), json.dumps(seconds, sort_keys=True)
+
+
+def _timed_reconstruct(slot: list[Any], sample: Any) -> tuple[np.ndarray, float]:
+    method = slot[1]
+    if not slot[2]:
+        method.reset()
+        method.reconstruct(sample)  # untimed first use in this process
+        slot[2] = True
+    method.reset()
+    t0 = time.perf_counter_ns()
+    image = method.reconstruct(sample)
+    return image, (time.perf_counter_ns() - t0) / 1e6
+
+
+def run_cell(task: CellTask) -> CellResult:
+    """Simulate the cell once and evaluate every method on it (see the module docstring).
+
+    Returns
+    -------
+    CellResult
+        ``len(task.methods) * len(METRICS)`` rows, in method order then :data:`METRICS` order.
+    """
+    from neuspike import methods as registry
+    from neuspike.metrics import evaluate
+
+    t_start = time.perf_counter()
+    cell = task.cell
+    width, height = cell.scene.spec.size
+    common = dict(
+        cell=task.cell_id, scene=cell.scene.name, kind=cell.scene.kind, image=cell.scene.image,
+        width=width, height=height, planes=task.sensor.planes, light=cell.condition.light,
+        motion=cell.condition.motion, noise=cell.condition.noise, seed=cell.seed,
+    )
+    failures: dict[str, str] = {}
+    skipped: dict[str, str] = {}
+    threads = None
+    try:
+        threads = prepare_worker(task.setup)
+    except Exception as exc:  # e.g. a plug-in that does not import: every method fails
+        failures["setup"] = traceback.format_exc()
+        rows = [base_row(**common, method=m, metric=k, status=ERROR, error=f"worker set-up failed: {one_line(exc)}")
+                for m in task.methods for k in METRICS]
+        return CellResult(task.cell_id, rows, ERROR, False, float("nan"), failures, skipped, threads,
+                          os.getpid(), time.perf_counter() - t_start)
+
+    # Resolve the methods first: the simulation is not needed when none can run.
+    resolved: dict[str, Any] = {}
+    info: dict[str, dict[str, Any]] = {}
+    for name in task.methods:
+        info[name] = {"method": name}
+        try:
+            entry = registry.entry(name)
+            info[name]["inputs"] = "+".join(sorted(entry.inputs))
+            slot = _method(name)
+            method = slot[1]
+            info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()))
+            resolved[name] = slot
+        except registry.MethodUnavailable as exc:
+            skipped[name] = one_line(exc)
+            info[name]["skip"] = f"unavailable: {skipped[name]}"
+        except Exception as exc:
+            failures[name] = traceback.format_exc()
+            info[name]["error"] = f"creating the method failed: {one_line(exc)}"
+
+    recording = None
+    cache_hit = False
+    sim_seconds = float("nan")
+    stage_names: list[tuple[str, str]] = []
+    stage_json = ""
+    if resolved:
+        try:
+            recording, cache_hit = simulate_cell(task)
+            stage_names, sim_seconds, stage_json = _stage_summary(recording.meta)
+        except Exception as exc:
+            failures["simulation"] = traceback.format_exc()
+            for name in resolved:
+                info[name]["error"] = f"simulation failed: {one_line(exc)}"
+            resolved = {}
+
+    sample = truth = None
+    images: dict[str, np.ndarray] = {}
+    if recording is not None:
+        full = recording.to_sample()
+        truth = full.ground_truth
+        sample = full.without_ground_truth()
+        if task.keep_images:
+            images["gt"] = truth
+
+    rows: list[dict[str, Any]] = []
+    for name in task.methods:
+        meta = info[name]
+        row = dict(common, method=name, inputs=meta.get("inputs", ""),
+                   recurrent=meta.get("recurrent", False), parameters=meta.get("parameters", 0),
+                   sim_seconds=sim_seconds, stage_seconds=stage_json)
+        if recording is not None and meta.get("inputs"):
+            used = set(meta["inputs"].split("+"))
+            row["effects"] = ";".join(f"{m}:{n}" for m, n in stage_names if m in used)
+        values: dict[str, float] = {}
+        if "skip" in meta:
+            row.update(status=SKIPPED, error=meta["skip"])
+        elif "error" in meta:
+            row.update(status=ERROR, error=meta["error"])
+        else:
+            slot = resolved[name]
+            method = slot[1]
+            try:
+                image, ms = _timed_reconstruct(slot, sample)
+                row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
+                values = evaluate(image, truth, data_range=DATA_RANGE)
+                row.update(status=OK, error="")
+                if task.keep_images:
+                    images[name] = np.array(image, dtype=np.float32, copy=True)  # not a reused buffer
+            except registry.MethodUnavailable as exc:
+                skipped[name] = one_line(exc)
+                row.update(status=SKIPPED, error=f"unavailable: {skipped[name]}")
+            except Exception as exc:
+                failures[name] = traceback.format_exc()
+                row.update(status=ERROR, error=one_line(exc))
+        for metric in METRICS:
+            rows.append(base_row(**row, metric=metric, value=float(values.get(metric, np.nan))))
+    status = ERROR if failures else OK
+    return CellResult(task.cell_id, rows, status, cache_hit, sim_seconds, failures, skipped, threads,
+                      os.getpid(), time.perf_counter() - t_start, images)

@@ -1,0 +1,118 @@
+"""Run metadata (``metadata.json``): what ran, where, with what, and when.
+
+Recorded: the source commit (and whether the working tree had uncommitted changes to tracked
+files), the versions of Python and of the packages that shape the numbers, the machine (host, OS,
+CPU model, logical CPUs usable, memory), the executor with its worker count and the torch threads
+per worker, the command line, and the start and end of every run that contributed to a results
+folder (a resumed sweep appends a run). When more than one worker shares the machine, the timing
+columns are marked as measured under contention (``timing_contended``): with two cores, cells
+running side by side slow each other down (``null`` on a remote Dask cluster, where it depends on
+how the cluster places its workers).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+import subprocess
+import sys
+from importlib import metadata as _metadata
+from pathlib import Path
+from typing import Any
+
+#: Distributions whose versions are recorded (absent ones are recorded as ``None``).
+PACKAGES = (
+    "neuspike-bench", "numpy", "torch", "kornia", "scikit-image", "scipy", "opencv-contrib-python-headless",
+    "pandas", "matplotlib", "h5py", "tqdm", "dask", "distributed",
+)
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def now_iso() -> str:
+    """The current time, ISO 8601 with the UTC offset, to the second."""
+    return _dt.datetime.now(_dt.timezone.utc).astimezone().isoformat(timespec="seconds")
+
+
+def _git(*args: str) -> str | None:
+    try:
+        out = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+def source_state() -> dict[str, Any]:
+    """``{"commit": sha or None, "dirty": bool or None}`` of the checkout this package runs from."""
+    commit = _git("rev-parse", "HEAD")
+    status = _git("status", "--porcelain", "--untracked-files=no") if commit else None
+    return {"commit": commit, "dirty": None if status is None else bool(status)}
+
+
+def package_versions() -> dict[str, str | None]:
+    out: dict[str, str | None] = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            out[name] = _metadata.version(name)
+        except _metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _cpu_model() -> str | None:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
+
+
+def _memory_bytes() -> int | None:
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def machine() -> dict[str, Any]:
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = os.cpu_count()
+    return {
+        "host": platform.node(),
+        "system": platform.platform(),
+        "machine": platform.machine(),
+        "cpu_model": _cpu_model(),
+        "logical_cpus": os.cpu_count(),
+        "usable_cpus": usable,
+        "memory_bytes": _memory_bytes(),
+    }
+
+
+def collect(*, executor: dict[str, Any], threads_per_worker: int | None, start: str,
+            contended: bool | None) -> dict[str, Any]:
+    """Metadata of a run that starts now (``end`` is filled by :func:`finish`).
+
+    ``contended``: whether cells run side by side on this machine (``None`` when unknown, e.g. on
+    a remote Dask cluster).
+    """
+    return {
+        "source": source_state(),
+        "versions": package_versions(),
+        "machine": machine(),
+        "command": [sys.executable, *sys.argv],
+        "executor": executor,
+        "threads_per_worker": threads_per_worker,
+        "timing_contended": contended,
+        "start": start,
+        "end": None,
+    }
+
+
+def finish(run: dict[str, Any], **fields: Any) -> dict[str, Any]:
+    """``run`` with its end time and ``fields`` (counts, observed threads) added."""
+    return {**run, **fields, "end": now_iso()}

@@ -1,0 +1,146 @@
+"""Tidy results: one row per (method, scene, condition, seed, metric).
+
+Columns (:data:`COLUMNS`)
+-------------------------
+``cell``            the cell's id (a hash of its identity and the sweep's methods; the part file's name)
+``scene``           ``KIND:IMAGE``; ``kind`` and ``image`` split out; ``width``, ``height`` in pixels
+``planes``          spike planes per window (T)
+``light``           light scale L; ``motion`` motion scale S; ``noise`` the noise level
+``effects``         the simulator stages that ran for the method's inputs, ``modality:name`` joined by ``;``
+``seed``            the cell's seed
+``method``          registry name; ``inputs`` its modalities joined by ``+``; ``recurrent`` bool;
+                    ``parameters`` its learned parameter count
+``normalisation``   the label the method reported (e.g. ``gain``, ``robust-p99``)
+``metric``          one of ``psnr``, ``ssim``, ``psnr_affine``, ``ssim_affine``; ``value`` its value
+``status``          ``ok``; ``error`` (the method or the simulation raised: ``value`` is NaN and
+                    ``error`` holds the exception's type and message); ``skipped`` (the method
+                    cannot run here, e.g. learned weights not given: ``error`` holds the reason;
+                    a skip is not a failure)
+``ms_per_frame``    wall time of the method's ``reconstruct`` call in milliseconds (simulation
+                    excluded; for recurrent methods the call includes the warm-up over the event
+                    history, as a recurrent method pays it once per sequence)
+``sim_seconds``     wall time of the cell's simulation (every stage, both modalities), from the
+                    recording's metadata, so a cached recording reports the time it originally took
+``stage_seconds``   JSON object ``{"modality:name": seconds}`` for every stage that ran
+
+Timing columns (:data:`TIMING_COLUMNS`) are measurements of one run on one machine and differ between
+any two runs; everything else is a deterministic function of the configuration and the seeds.
+Compare runs with :func:`drop_timing`.
+
+Files are written atomically. ``results.csv`` is assembled from the per-cell part files in the
+order of :data:`SORT_COLUMNS`, so it does not depend on which cells finished first.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from bench.cache import write_text_atomic
+
+COLUMNS: tuple[str, ...] = (
+    "cell", "scene", "kind", "image", "width", "height", "planes",
+    "light", "motion", "noise", "effects", "seed",
+    "method", "inputs", "recurrent", "parameters", "normalisation",
+    "metric", "value", "status", "error",
+    "ms_per_frame", "sim_seconds", "stage_seconds",
+)
+#: Columns that hold run-dependent measurements of time.
+TIMING_COLUMNS: tuple[str, ...] = ("ms_per_frame", "sim_seconds", "stage_seconds")
+#: The order of rows in ``results.csv``.
+SORT_COLUMNS: tuple[str, ...] = ("scene", "noise", "light", "motion", "seed", "method", "metric")
+#: Row statuses.
+OK, ERROR, SKIPPED = "ok", "error", "skipped"
+
+_DTYPES: Mapping[str, Any] = {
+    "cell": str, "scene": str, "kind": str, "image": str, "width": "int64", "height": "int64",
+    "planes": "int64", "light": "float64", "motion": "int64", "noise": str, "effects": str,
+    "seed": "int64", "method": str, "inputs": str, "recurrent": bool, "parameters": "int64",
+    "normalisation": str, "metric": str, "value": "float64", "status": str, "error": str,
+    "ms_per_frame": "float64", "sim_seconds": "float64", "stage_seconds": str,
+}
+_TEXT = [c for c, t in _DTYPES.items() if t is str]
+
+
+def rows_frame(rows: Iterable[Mapping[str, Any]]) -> pd.DataFrame:
+    """Rows (dicts with every key of :data:`COLUMNS`) as a typed DataFrame in column order."""
+    rows = list(rows)
+    missing = [sorted(set(COLUMNS) - set(r)) for r in rows if set(COLUMNS) - set(r)]
+    if missing:
+        raise ValueError(f"result rows lack columns {missing[0]}")
+    frame = pd.DataFrame(rows, columns=list(COLUMNS))
+    return _typed(frame)
+
+
+def _typed(frame: pd.DataFrame) -> pd.DataFrame:
+    for col in _TEXT:
+        frame[col] = frame[col].fillna("").astype(str)
+    if frame["recurrent"].dtype == object:  # text from a CSV reader that did not infer booleans
+        frame["recurrent"] = frame["recurrent"].map(lambda v: v if isinstance(v, bool) else str(v) == "True")
+    for col, dtype in _DTYPES.items():
+        if dtype is not str:
+            frame[col] = frame[col].astype(dtype)
+    return frame
+
+
+def to_csv_text(frame: pd.DataFrame) -> str:
+    """CSV text; floats written with full precision (``repr``), NaN as an empty field."""
+    buf = io.StringIO()
+    frame.to_csv(buf, index=False, lineterminator="\n")
+    return buf.getvalue()
+
+
+def read_csv(path: str | os.PathLike) -> pd.DataFrame:
+    """Read a part file or ``results.csv`` back with the documented dtypes."""
+    frame = pd.read_csv(path, dtype={c: str for c in _TEXT}, keep_default_na=False,
+                        na_values={c: [""] for c in _DTYPES if _DTYPES[c] is not str})
+    missing = set(COLUMNS) - set(frame.columns)
+    if missing:
+        raise ValueError(f"{path}: missing result columns {sorted(missing)}")
+    return _typed(frame[list(COLUMNS)].copy())
+
+
+def write_part(parts_dir: str | os.PathLike, cell_id: str, rows: Sequence[Mapping[str, Any]]) -> Path:
+    """Write one cell's rows to ``<parts_dir>/<cell_id>.csv`` atomically."""
+    return write_text_atomic(Path(parts_dir) / f"{cell_id}.csv", to_csv_text(rows_frame(rows)))
+
+
+def part_path(parts_dir: str | os.PathLike, cell_id: str) -> Path:
+    return Path(parts_dir) / f"{cell_id}.csv"
+
+
+def sort_rows(frame: pd.DataFrame) -> pd.DataFrame:
+    """Rows in the order of :data:`SORT_COLUMNS` (stable), index reset."""
+    return frame.sort_values(list(SORT_COLUMNS), kind="mergesort").reset_index(drop=True)
+
+
+def assemble(parts_dir: str | os.PathLike, cell_ids: Iterable[str], out_path: str | os.PathLike) -> pd.DataFrame:
+    """Join the part files of ``cell_ids`` (those that exist) into ``out_path``, sorted, atomically."""
+    frames = [read_csv(p) for p in (part_path(parts_dir, c) for c in cell_ids) if p.exists()]
+    frame = pd.concat(frames, ignore_index=True) if frames else rows_frame([])
+    frame = sort_rows(frame)
+    write_text_atomic(out_path, to_csv_text(frame))
+    return frame
+
+
+def drop_timing(frame: pd.DataFrame) -> pd.DataFrame:
+    """The frame without :data:`TIMING_COLUMNS` (what two runs of one configuration share)."""
+    return frame.drop(columns=[c for c in TIMING_COLUMNS if c in frame.columns])
+
+
+def cell_status(frame: pd.DataFrame) -> str:
+    """``error`` if any row of one cell's rows failed, else ``ok`` (skips are not failures)."""
+    return ERROR if (frame["status"] == ERROR).any() else OK
+
+
+def base_row(**fields: Any) -> dict[str, Any]:
+    """A row with every column, defaults for the ones not given (NaN numbers, empty text)."""
+    row: dict[str, Any] = {c: ("" if _DTYPES[c] is str else np.nan) for c in COLUMNS}
+    row.update(recurrent=False, parameters=0)
+    row.update(fields)
+    return row

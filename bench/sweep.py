@@ -1,0 +1,699 @@
+"""Sweeps over light and motion (the paper's Figures 3 and 4): ``python -m bench.sweep``.
+
+A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method, and writes
+into its output folder:
+
+``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs)
+                    and how it was executed
+``metadata.json``   provenance (:mod:`bench.provenance`): commit, versions, machine, executor,
+                    threads per worker, start and end of each run
+``parts/<cell>.csv`` one cell's rows, written atomically when the cell finishes
+``results.csv``     every row (:mod:`bench.results`), assembled from the parts, sorted
+``errors/<cell>.txt`` tracebacks of the failures of a cell, when any
+``images/``         reconstructions and ground truth for the report's figure grid, in the layout
+                    of :mod:`bench.report` (``images/<scene>/<axis>=<value>/<method>.png``): for the
+                    swept axis, of the first seed with the other axes at their first value
+``cache/``          simulated recordings (:mod:`bench.cache`), unless ``--cache`` points elsewhere
+
+Resuming
+    Finished cells are never recomputed: a rerun of the same command after a crash, an interrupt or
+    a kill runs only the cells without a part file, then assembles ``results.csv``, which equals an
+    uninterrupted run's in every column except the timing columns
+    (:data:`bench.results.TIMING_COLUMNS`), which measure each run anew. A rerun with a different
+    configuration in the same folder is refused (``--force`` replaces the old results; cached
+    recordings stay valid since their keys hold everything that determines them). Cells whose
+    methods failed are kept as results; ``--retry-failed`` runs them again.
+
+Exit status
+    0 when every cell ran without failure; 1 when a method or a simulation failed (error rows)
+    unless ``--allow-failures``, and always when cells are missing (a worker died); 2 for invalid
+    options or a changed configuration; 130 when interrupted. Methods that cannot run here (e.g.
+    learned weights not given) are skipped with the reason in their rows; a skip is not a failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.util
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import pandas as pd
+
+from bench import grid as grids
+from bench.cache import canonical_json, stable_hash, write_json_atomic, write_text_atomic
+from bench.cells import (WEIGHTS_ENV, CellTask, WorkerSetup, load_plugins, one_line, plugin_names,
+                         prepare_worker, run_cell)
+from bench.executors import EXECUTORS, DaskExecutor, make_executor
+from bench.grid import Grid
+from bench.provenance import collect, finish, now_iso
+from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
+from neuspike.conditions import parse_effects
+from neuspike.errors import InputError, NeuSpikeError
+
+#: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
+HARNESS_VERSION = "1"
+#: Default event history for recurrent methods, in windows of the spike window's duration.
+DEFAULT_HISTORY_WINDOWS = 5.0
+
+
+class ConfigMismatch(InputError):
+    """The output folder holds results of a different configuration."""
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What a sweep measures (everything that determines its results).
+
+    Parameters
+    ----------
+    name : str
+        ``"light"``, ``"motion"``, ``"noise"`` or any label.
+    grid : Grid
+    methods : tuple of str
+        Registry names, in the order rows are produced.
+    sensor : SensorConfig
+        Planes per window, plane rate, thresholds.
+    history_windows : float
+        Event history before the window, in window durations, simulated only when a requested
+        method is recurrent (it warms up on it).
+    weights : str or None
+        Folder of learned weights (``NEUSPIKE_WEIGHTS``).
+    axis : str or None
+        The swept axis (``"light"``, ``"motion"``, ``"noise"``) whose reconstructions are saved
+        as images for the report's figure grid; ``None`` saves none.
+    """
+
+    name: str
+    grid: Grid
+    methods: tuple[str, ...]
+    sensor: Any = None
+    history_windows: float = DEFAULT_HISTORY_WINDOWS
+    weights: str | None = None
+    axis: str | None = None
+
+    def __post_init__(self) -> None:
+        from neuspike.simulate import SensorConfig
+
+        if self.sensor is None:
+            object.__setattr__(self, "sensor", SensorConfig())
+        methods = tuple(self.methods)
+        if not methods:
+            raise InputError("a sweep needs at least one method")
+        if len(set(methods)) != len(methods):
+            raise InputError(f"methods repeat a name: {list(methods)}")
+        object.__setattr__(self, "methods", methods)
+        hw = float(self.history_windows)
+        if not hw >= 0 or hw != hw or hw == float("inf"):
+            raise InputError(f"history_windows: expected a finite number >= 0, got {self.history_windows!r}")
+        object.__setattr__(self, "history_windows", hw)
+        if self.weights is not None:
+            object.__setattr__(self, "weights", str(Path(self.weights).resolve()))
+        if self.axis is not None and self.axis not in grids.AXES:
+            raise InputError(f"axis: expected one of {', '.join(grids.AXES)} or None, got {self.axis!r}")
+        self.grid.check_planes(self.sensor.planes)
+
+    def keeps_images(self, cell: grids.Cell) -> bool:
+        """Whether ``cell``'s reconstructions go to ``images/``: the first seed, and every axis
+        other than :attr:`axis` at its first value (so each image path names one cell)."""
+        if self.axis is None or cell.seed != self.grid.seeds[0]:
+            return False
+        firsts = {"light": self.grid.lights[0], "motion": self.grid.motions[0], "noise": self.grid.noises[0]}
+        c = cell.condition
+        return all(getattr(c, ax) == v for ax, v in firsts.items() if ax != self.axis)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "grid": self.grid.as_dict(),
+            "methods": list(self.methods),
+            "sensor": self.sensor.as_dict(),
+            "history_windows": self.history_windows,
+            "weights": self.weights,
+            "axis": self.axis,
+        }
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How a sweep runs (nothing here changes its results, only the timing columns).
+
+    Parameters
+    ----------
+    executor : str or executor object
+        ``"local"`` or ``"dask"``, or an instance of :class:`~bench.executors.LocalExecutor` /
+        :class:`~bench.executors.DaskExecutor`.
+    workers : int
+        Worker processes (local) or LocalCluster workers (dask).
+    scheduler : str or None
+        Address of an existing Dask scheduler.
+    threads : int or None
+        torch threads per worker; ``None``: the usable CPUs divided by the workers (at least 1),
+        or 1 on a remote Dask cluster.
+    cache_dir : path or None
+        Where simulated recordings are cached; ``None`` means ``<out>/cache``.
+    use_cache : bool
+        ``False`` simulates every cell afresh and stores nothing.
+    plugins : tuple of str
+        Plug-in modules each worker imports (see :func:`bench.cells.load_plugins`).
+    allow_failures, force, retry_failed, progress, report :
+        See the command line's help. ``progress=None`` shows the bar only on a terminal.
+    """
+
+    executor: Any = "local"
+    workers: int = 1
+    scheduler: str | None = None
+    threads: int | None = None
+    cache_dir: str | os.PathLike | None = None
+    use_cache: bool = True
+    plugins: tuple[str, ...] = ()
+    allow_failures: bool = False
+    force: bool = False
+    retry_failed: bool = False
+    progress: bool | None = None
+    report: bool = True
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep did. ``exit_code`` is the command's exit status (module docstring)."""
+
+    out_dir: Path
+    results_path: Path
+    n_cells: int
+    n_ok: int
+    n_failed: int
+    n_missing: int
+    n_computed: int
+    n_cache_hits: int
+    skipped: dict[str, str]
+    allow_failures: bool
+    seconds: float
+    time_split: dict[str, Any] = field(default_factory=dict)
+    report_path: Path | None = None
+    report_note: str | None = None
+    report_failed: bool = False
+
+    @property
+    def exit_code(self) -> int:
+        if self.n_missing or self.report_failed:
+            return 1
+        if self.n_failed and not self.allow_failures:
+            return 1
+        return 0
+
+    def summary(self) -> str:
+        lines = [f"{self.n_ok} cells ok, {self.n_failed} failed"
+                 + (f", {self.n_missing} missing (rerun to complete them)" if self.n_missing else "")
+                 + f" ({self.n_computed} computed now, {self.n_cache_hits} from the recording cache; "
+                 f"{self.seconds:.1f} s)"]
+        for name, reason in sorted(self.skipped.items()):
+            lines.append(f"skipped {name}: {reason}")
+        if self.time_split:
+            sim = self.time_split["simulation_s_per_cell"]
+            per = ", ".join(f"{m} {v:.1f}" for m, v in self.time_split["method_ms_per_frame"].items())
+            lines.append(f"time: simulation {sim:.3f} s per cell; methods, median ms per frame: {per}")
+        if self.n_failed and self.allow_failures:
+            lines.append("failures allowed (--allow-failures): see the error column and errors/")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------
+# Resolving a sweep
+# ----------------------------------------------------------------------------------------------
+
+def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
+    """Which methods can run here, what they consume, and the event history they need.
+
+    Every method is created once in this process: unknown names raise :class:`InputError` before
+    anything runs; :class:`~neuspike.methods.MethodUnavailable` marks a method as skipped. The
+    modalities simulated are the union of the inputs of the available methods; the event history
+    is ``history_windows`` window durations when one of them is recurrent, else 0.
+    """
+    from neuspike import methods as registry
+
+    prepare_worker(setup)
+    inputs: dict[str, list[str]] = {}
+    unavailable: dict[str, str] = {}
+    recurrent: list[str] = []
+    for name in spec.methods:
+        entry = registry.entry(name)
+        try:
+            method = registry.create(name)
+        except registry.MethodUnavailable as exc:
+            unavailable[name] = one_line(exc)
+            continue
+        inputs[name] = sorted(entry.inputs)
+        if method.recurrent:
+            recurrent.append(name)
+    modalities = sorted({m for ins in inputs.values() for m in ins})
+    window_s = spec.sensor.planes / spec.sensor.plane_rate_hz
+    history_s = spec.history_windows * window_s if recurrent and "events" in modalities else 0.0
+    return {"inputs": inputs, "unavailable": unavailable, "recurrent": recurrent,
+            "modalities": modalities, "history_s": history_s}
+
+
+def cell_id(spec: SweepSpec, resolved: dict[str, Any], cell: grids.Cell) -> str:
+    """The id of a cell's part file: a hash of the cell and of what the sweep does with it."""
+    return stable_hash({
+        "harness": HARNESS_VERSION, "cell": cell.identity(), "sensor": spec.sensor.as_dict(),
+        "methods": list(spec.methods), "modalities": resolved["modalities"],
+        "history_s": resolved["history_s"], "weights": spec.weights,
+    })
+
+
+def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for key in sorted(set(old) | set(new)):
+            out += _diff_paths(old.get(key), new.get(key), f"{path}.{key}" if path else str(key))
+        return out
+    return [] if old == new else [path or "(everything)"]
+
+
+def _check_config(out: Path, sweep_config: dict[str, Any], force: bool) -> bool:
+    """Compare with an existing ``config.json``; return whether the old results are stale."""
+    path = out / "config.json"
+    if not path.exists():
+        return False
+    try:
+        old = json.loads(path.read_text()).get("sweep")
+    except (OSError, ValueError) as exc:
+        old = {"unreadable": str(exc)}
+    new = json.loads(canonical_json(sweep_config))
+    if old == new:
+        return False
+    if not force:
+        changed = ", ".join(_diff_paths(old, new)[:8])
+        raise ConfigMismatch(
+            f"{out} holds results of a different sweep (changed: {changed}). Use a new --out folder, "
+            "or --force to replace those results (cached recordings are kept and reused)."
+        )
+    return True
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _time_split(frame: pd.DataFrame) -> dict[str, Any]:
+    """Where the time went: simulation per cell and each method's median ms per frame."""
+    if frame.empty:
+        return {}
+    one = frame[frame["metric"] == frame["metric"].iloc[0]]
+    sim = one.drop_duplicates("cell")["sim_seconds"].dropna()
+    per_method = (one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].median().dropna())
+    return {
+        "simulation_s_per_cell": float(sim.mean()) if len(sim) else float("nan"),
+        "simulation_s_total": float(sim.sum()),
+        "method_ms_per_frame": {m: float(v) for m, v in per_method.items()},
+        "method_s_total": {m: float(v) / 1e3 for m, v in
+                           one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].sum().items()},
+    }
+
+
+def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[str, Any]) -> None:
+    """Write a cell's images in :mod:`bench.report`'s layout (nothing when that module is absent)."""
+    if importlib.util.find_spec("bench.report") is None:
+        return
+    from bench.report import image_path, write_image_png
+
+    value = getattr(cell.condition, axis)
+    for name, image in images.items():
+        write_image_png(image_path(images_dir, cell.scene.name, axis, value, name), image)
+
+
+def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]:
+    """Call ``bench.report.build_report(out)`` when that module exists.
+
+    Returns ``(pdf_path, note, failed)``: a note instead of a path when the module is not installed
+    or the report failed.
+    """
+    if importlib.util.find_spec("bench.report") is None:
+        return None, "report: bench.report is not available here; results.csv holds every number", False
+    try:
+        from bench.report import build_report
+
+        return Path(build_report(out)), None, False
+    except Exception as exc:
+        return None, f"report failed: {one_line(exc)}", True
+
+
+# ----------------------------------------------------------------------------------------------
+# Running a sweep
+# ----------------------------------------------------------------------------------------------
+
+def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution = Execution()) -> SweepOutcome:
+    """Run (or resume) a sweep into ``out_dir`` and assemble its ``results.csv``.
+
+    Raises
+    ------
+    InputError
+        Unknown methods or invalid options (before anything runs).
+    ConfigMismatch
+        ``out_dir`` holds results of a different sweep and ``execution.force`` is false.
+    """
+    t_start = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    parts_dir, errors_dir = out / "parts", out / "errors"
+
+    executor = execution.executor
+    if isinstance(executor, str):
+        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
+    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
+    threads = execution.threads
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise InputError(f"threads: expected a whole number >= 1, got {threads!r}")
+    if threads is None:
+        usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        threads = 1 if remote else max(1, usable // max(1, executor.workers))
+    plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
+    setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads)
+
+    resolved = resolve_methods(spec, setup)
+    sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved}
+    stale = _check_config(out, sweep_config, execution.force)
+    cache_dir = None
+    if execution.use_cache:
+        cache_dir = str(Path(execution.cache_dir).resolve() if execution.cache_dir else (out / "cache").resolve())
+
+    cells = spec.grid.cells()
+    tasks = []
+    for cell in cells:
+        tasks.append(CellTask(
+            cell_id=cell_id(spec, resolved, cell), cell=cell, sensor=spec.sensor, methods=spec.methods,
+            modalities=tuple(resolved["modalities"]), history_s=resolved["history_s"],
+            cache_dir=cache_dir, setup=setup, keep_images=spec.keeps_images(cell),
+        ))
+    ids = [t.cell_id for t in tasks]
+    if len(set(ids)) != len(ids):
+        raise InputError("two cells of the grid are identical; check the scene names and axes")
+
+    if stale:
+        for path in (out / "results.csv",):
+            path.unlink(missing_ok=True)
+        for folder in (parts_dir, errors_dir, out / "images"):
+            shutil.rmtree(folder, ignore_errors=True)
+    parts_dir.mkdir(exist_ok=True)
+    for path in parts_dir.glob(".*.tmp"):  # left by a run killed while writing; never a result
+        path.unlink(missing_ok=True)
+    wanted = set(ids)
+    for path in parts_dir.glob("*.csv"):  # parts of an older harness version or of a forced rerun
+        if path.stem not in wanted:
+            path.unlink()
+
+    execution_config = {
+        **executor.describe(), "threads_per_worker": threads, "cache_dir": cache_dir,
+        "plugins": list(plugins), "allow_failures": execution.allow_failures,
+    }
+    write_json_atomic(out / "config.json", {"sweep": sweep_config, "execution": execution_config})
+
+    done: dict[str, str] = {}
+    for cid in ids:
+        path = part_path(parts_dir, cid)
+        if path.exists():
+            try:
+                status = ERROR if (read_csv(path)["status"] == ERROR).any() else OK
+            except (OSError, ValueError):
+                path.unlink()  # not a part this harness wrote; recompute
+                continue
+            if status == ERROR and execution.retry_failed:
+                continue
+            done[cid] = status
+    todo = [t for t in tasks if t.cell_id not in done]
+
+    previous = _read_json(out / "metadata.json") if not stale else None
+    history = []
+    if previous:
+        history = list(previous.get("previous_runs", [])) + [
+            {k: previous.get(k) for k in ("start", "end", "executor", "threads_per_worker",
+                                           "cells_computed", "source")}]
+    run = collect(executor=executor.describe(), threads_per_worker=threads, start=now_iso(),
+                  contended=None if remote else executor.workers > 1)
+    run["sweep"] = spec.name
+    run["previous_runs"] = history
+    write_json_atomic(out / "metadata.json", run)
+
+    n_failed_now = n_hits = n_computed = 0
+    crashed: dict[str, str] = {}
+    observed_threads: set[int] = set()
+    skipped: dict[str, str] = dict(resolved["unavailable"])
+    from tqdm import tqdm
+
+    n_done_failed = sum(1 for s in done.values() if s == ERROR)
+    bar = tqdm(total=len(tasks), initial=len(done), unit="cell", desc=f"{spec.name} sweep",
+               disable=(None if execution.progress is None else not execution.progress),
+               file=sys.stderr, dynamic_ncols=True)
+
+    def postfix() -> None:
+        bar.set_postfix(done=len(done), failed=n_done_failed + n_failed_now + len(crashed),
+                        remaining=len(tasks) - len(done) - len(crashed), refresh=False)
+
+    postfix()
+    try:
+        with (executor if todo else contextlib.nullcontext()):
+            for task, result in (executor.run(run_cell, todo) if todo else ()):
+                if isinstance(result, BaseException):
+                    crashed[task.cell_id] = one_line(result)
+                else:
+                    if result.images:  # before the part: a finished cell always has its images
+                        _write_images(out / "images", spec.axis, task.cell, result.images)
+                    write_part(parts_dir, task.cell_id, result.rows)
+                    if result.failures:
+                        text = "\n".join(f"== {k} ==\n{v}" for k, v in result.failures.items())
+                        write_text_atomic(errors_dir / f"{task.cell_id}.txt", text)
+                    else:  # a retried cell that now succeeds
+                        (errors_dir / f"{task.cell_id}.txt").unlink(missing_ok=True)
+                    done[task.cell_id] = result.status
+                    n_computed += 1
+                    n_hits += int(result.cache_hit)
+                    n_failed_now += int(result.status == ERROR)
+                    skipped.update(result.skipped)
+                    if result.threads is not None:
+                        observed_threads.add(result.threads)
+                postfix()
+                bar.update(1)
+    finally:
+        bar.close()
+
+    results_path = out / "results.csv"
+    frame = assemble(parts_dir, ids, results_path)
+    n_failed = sum(1 for s in done.values() if s == ERROR)
+    n_missing = len(tasks) - len(done)
+    split = _time_split(frame)
+    outcome = SweepOutcome(
+        out_dir=out, results_path=results_path, n_cells=len(tasks), n_ok=len(done) - n_failed,
+        n_failed=n_failed, n_missing=n_missing, n_computed=n_computed, n_cache_hits=n_hits,
+        skipped=skipped, allow_failures=execution.allow_failures,
+        seconds=time.perf_counter() - t_start, time_split=split,
+    )
+    run = finish(run, cells_total=len(tasks), cells_computed=n_computed, cells_failed=n_failed,
+                 cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,
+                 threads_observed=sorted(observed_threads), time_split=split,
+                 wall_seconds=outcome.seconds)
+    write_json_atomic(out / "metadata.json", run)
+    if execution.report and not frame.empty:
+        outcome.report_path, outcome.report_note, outcome.report_failed = build_report_if_available(out)
+    return outcome
+
+
+# ----------------------------------------------------------------------------------------------
+# Command line (shared with bench.noise)
+# ----------------------------------------------------------------------------------------------
+
+COMMON_EPILOG = """\
+methods: every registered method by default (python -m neuspike.reconstruct --list shows them).
+Learned methods need weights (--weights DIR or NEUSPIKE_WEIGHTS); without them they are skipped
+and the reason is written in their rows; a skip is not a failure.
+
+plug-ins: --plugin MODULE (repeatable; a dotted module name or a path to a .py file), or the
+NEUSPIKE_PLUGINS environment variable (comma-separated), names modules that register extra methods
+when imported (neuspike.methods.register). Every worker imports them, so your methods run on local
+worker processes and on Dask workers alike; the module must be importable there.
+
+outputs in --out: results.csv (one row per method, scene, condition, seed and metric),
+config.json, metadata.json, parts/ (one file per finished cell), errors/ (tracebacks), cache/
+(simulated recordings, unless --cache says otherwise), images/ (reconstructions across the swept
+axis, first seed), and the report (figures/, tables/, report.pdf) when bench.report exists.
+A rerun of the same command resumes: finished cells are not recomputed. A different configuration
+in the same --out is refused unless --force.
+
+timing: ms_per_frame is the wall time of one reconstruct call (recurrent methods: including the
+warm-up over the event history). With --workers > 1 cells run side by side and slow each other
+down on a small machine; metadata.json marks such timings (timing_contended). Use python -m
+bench.timing for careful timings.
+
+exit status: 0 all cells ok; 1 a method or simulation failed (unless --allow-failures) or cells are
+missing; 2 invalid options or a changed configuration; 130 interrupted (rerun to resume)."""
+
+
+def add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every sweep command shares."""
+    g = parser.add_argument_group("what to measure")
+    g.add_argument("--methods", help="comma-separated registry names (default: every registered method)")
+    g.add_argument("--scenes", help="comma-separated KIND:IMAGE, KIND in pan, zoom, fan, still; IMAGE a "
+                   f"bundled test photograph or an image file (default: {','.join(grids.QUICK_SCENES)}; "
+                   f"with --full every kind over {','.join(grids.FULL_PHOTOS)})")
+    g.add_argument("--seeds", help=f"comma-separated seeds (default: {','.join(map(str, grids.QUICK_SEEDS))}; "
+                   f"with --full {','.join(map(str, grids.FULL_SEEDS))})")
+    g.add_argument("--size", help=f"view WxH (default: {'x'.join(map(str, grids.QUICK_SIZE))}; "
+                   f"with --full {'x'.join(map(str, grids.FULL_SIZE))})")
+    g.add_argument("--full", action="store_true", help="the paper-size run: 400x250, every scene kind (pan, zoom, "
+                   f"fan, still) over {' and '.join(grids.FULL_PHOTOS)}, seeds "
+                   f"{','.join(map(str, grids.FULL_SEEDS))}")
+    g.add_argument("--lights", help="override the light scales L, comma-separated (fractions allowed: 1/32)")
+    g.add_argument("--motions", help="override the motion scales S, comma-separated (each must divide --planes)")
+    g.add_argument("--planes", type=int, default=256, help="spike planes per window T (default: 256)")
+    g.add_argument("--effects", help="extra simulator stages declared in every condition, e.g. "
+                   "'initial_charge;threshold_mismatch:sigma=0.02' (default: exactly that: Algorithm 1's "
+                   "random initial charge and v2e's clean event preset); 'none' declares nothing extra")
+    g.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
+                   help="event history before each window for recurrent methods to warm up on, in window "
+                   f"durations (default: {DEFAULT_HISTORY_WINDOWS:g}; simulated only when a recurrent "
+                   "method is requested)")
+    g.add_argument("--weights", help="folder of learned weights (sets NEUSPIKE_WEIGHTS in every worker)")
+    g.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                   help="import MODULE in every worker to register extra methods (repeatable)")
+    r = parser.add_argument_group("how to run")
+    r.add_argument("--out", help="output folder (default: runs/<sweep>, runs/<sweep>-full with --full)")
+    r.add_argument("--executor", choices=EXECUTORS, default="local",
+                   help="local worker processes (default) or a Dask cluster")
+    r.add_argument("--workers", type=int, default=1,
+                   help="worker processes (default: 1 = in this process)")
+    r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask); "
+                   "without it a local Dask cluster of --workers processes is started")
+    r.add_argument("--threads", type=int, help="torch threads per worker (default: usable CPUs / workers)")
+    r.add_argument("--cache", help="folder of cached simulated recordings (default: <out>/cache); "
+                   "'none' disables the cache")
+    r.add_argument("--allow-failures", action="store_true",
+                   help="exit 0 even when methods failed (their rows carry the error)")
+    r.add_argument("--force", action="store_true",
+                   help="replace results of a different configuration in --out")
+    r.add_argument("--retry-failed", action="store_true", help="run cells with failed methods again")
+    r.add_argument("--no-report", action="store_true", help="do not build the report at the end")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _methods_from(args: argparse.Namespace) -> tuple[str, ...]:
+    from neuspike import methods as registry
+
+    load_plugins(plugin_names(tuple(args.plugin)))
+    for problem in registry.load_entry_points():
+        print(f"warning: a method plug-in failed to load: {problem}", file=sys.stderr)
+    if args.methods:
+        names = grids.parse_list(args.methods)
+        for name in names:
+            registry.entry(name)  # unknown names raise here, with the list of known ones
+        return names
+    names = tuple(registry.available())
+    if not names:
+        raise InputError("no methods are registered (is the package installed with its baselines?)")
+    return names
+
+
+def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Sequence[str] | None = None) -> SweepSpec:
+    """Build the :class:`SweepSpec` of a command line."""
+    from neuspike.simulate import SensorConfig
+
+    if args.weights is not None:
+        if not Path(args.weights).is_dir():
+            raise InputError(f"--weights: {args.weights!r} is not a folder")
+        os.environ[WEIGHTS_ENV] = str(Path(args.weights).resolve())
+    if args.effects is None:
+        effects = None
+    elif args.effects.strip().lower() == "none":
+        effects = ()
+    else:
+        effects = parse_effects(args.effects)
+    grid = grids.preset(
+        axis, full=args.full,
+        size=grids.parse_size(args.size) if args.size else None,
+        scenes=grids.parse_list(args.scenes) if args.scenes else None,
+        seeds=grids.parse_list(args.seeds, grids.parse_int) if args.seeds else None,
+        lights=grids.parse_list(args.lights, grids.parse_fraction) if args.lights else None,
+        motions=grids.parse_list(args.motions, grids.parse_int) if args.motions else None,
+        noises=noises, effects=effects,
+    )
+    return SweepSpec(
+        name=name, grid=grid, methods=_methods_from(args), sensor=SensorConfig(planes=args.planes),
+        history_windows=args.history_windows, weights=os.environ.get(WEIGHTS_ENV) or None, axis=axis,
+    )
+
+
+def execution_from_args(args: argparse.Namespace) -> Execution:
+    cache = args.cache
+    return Execution(
+        executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads,
+        cache_dir=None if cache in (None, "none") else cache, use_cache=(cache != "none"),
+        plugins=tuple(args.plugin), allow_failures=args.allow_failures, force=args.force,
+        retry_failed=args.retry_failed, progress=False if args.no_progress else None,
+        report=not args.no_report,
+    )
+
+
+def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int:
+    """Run a parsed sweep command; print the summary and where the results are; return the exit code."""
+    try:
+        spec = spec_builder(args)
+        execution = execution_from_args(args)
+        out = Path(args.out or default_out)
+        print(f"{spec.name} sweep: {len(spec.grid.cells())} cells x {len(spec.methods)} methods -> {out}",
+              file=sys.stderr)
+        outcome = run_sweep(spec, out, execution)
+    except KeyboardInterrupt:
+        print("interrupted: finished cells are saved; rerun the same command to resume", file=sys.stderr)
+        return 130
+    except NeuSpikeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(outcome.summary())
+    print(f"results: {outcome.results_path}")
+    if outcome.report_path is not None:
+        print(f"report: {outcome.report_path}")
+    elif outcome.report_note:
+        print(outcome.report_note)
+    return outcome.exit_code
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.sweep",
+        description="Sweep light or motion over every registered method (the paper's Figures 3 and 4): "
+        "simulate each cell once, reconstruct with every method, score PSNR and SSIM (and their "
+        "affine-aligned variants), time each method, and write tidy results.",
+        epilog="examples:\n"
+        "  python -m bench.sweep --axis light                 # quick: 2 scenes at 160x100, L = 1/32 ... 1/2\n"
+        "  python -m bench.sweep --axis motion --methods tfp-w32,tfi,events-integrate\n"
+        "  python -m bench.sweep --axis light --full --workers 2 --weights ../shared/weights/firenet\n"
+        "  python -m bench.sweep --axis light --executor dask --scheduler tcp://10.0.0.5:8786\n"
+        "  python -m bench.sweep --axis motion --plugin my_methods --methods mine,tfi\n\n"
+        "presets: light = S 128, L in {1/32, 1/16, 1/8, 1/4, 1/2}; motion = L 1/4, S in\n"
+        "{16, 32, 64, 128, 256}; noise level none (python -m bench.noise sweeps the noise levels).\n\n"
+        + COMMON_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--axis", choices=("light", "motion"), default="light",
+                        help="the swept axis (default: light)")
+    add_common_arguments(parser)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    default_out = f"runs/{args.axis}" + ("-full" if args.full else "")
+    return run_command(lambda a: spec_from_args(a, a.axis, a.axis), args, default_out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,394 @@
+"""The benchmark harness: grids, cells, the recording cache, tidy results, resuming, executors."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import grid as grids
+from bench.cache import load_recording, save_recording
+from bench.cells import forget_plugin, load_plugins
+from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
+from bench.sweep import ConfigMismatch, Execution, SweepSpec, main, run_sweep
+from neuspike import methods as registry
+from neuspike.errors import InputError
+from neuspike.simulate import SensorConfig
+
+PLANES = 32
+SIZE = (32, 24)
+
+# Tiny methods, registered by a plug-in module so that subprocesses and Dask workers see them too.
+PLUGIN = textwrap.dedent('''
+    import os
+    import time
+
+    import numpy as np
+
+    from neuspike.methods import Method, MethodUnavailable, register
+
+
+    class MeanRate(Method):
+        """Spike count over the window divided by planes and gain (TFP over the whole window)."""
+
+        inputs = frozenset({"spikes"})
+
+        def _reconstruct(self, sample):
+            delay = float(os.environ.get("HT_SLEEP_S", "0"))
+            if delay:
+                time.sleep(delay)
+            s = sample.spikes
+            rate = s.planes.mean(axis=0, dtype=np.float64) / s.gain * self.params.get("scale", 1.0)
+            return np.clip(rate, 0.0, 1.0).astype(np.float32), "gain"
+
+
+    class Failing(Method):
+        inputs = frozenset({"spikes"})
+
+        def _reconstruct(self, sample):
+            if os.environ.get("HT_FIXED"):
+                return np.zeros((sample.height, sample.width), np.float32), "none"
+            raise RuntimeError("deliberate failure")
+
+
+    class Unavailable(Method):
+        inputs = frozenset({"events"})
+
+        def __init__(self, name=None, **params):
+            raise MethodUnavailable("weights not given (test)")
+
+        def _reconstruct(self, sample):
+            raise AssertionError("never called")
+
+
+    NAMES = ("ht-mean", "ht-mean-x2", "ht-fail", "ht-unavailable")
+    register("ht-mean", MeanRate)
+    register("ht-mean-x2", MeanRate, params={"scale": 2.0})
+    register("ht-fail", Failing)
+    register("ht-unavailable", Unavailable)
+''')
+
+
+@pytest.fixture
+def plugin(tmp_path):
+    """Path of the plug-in file, imported here too; its methods are unregistered afterwards."""
+    path = tmp_path / "ht_plugin.py"
+    path.write_text(PLUGIN)
+    load_plugins((str(path),))
+    yield str(path)
+    for name in ("ht-mean", "ht-mean-x2", "ht-fail", "ht-unavailable"):
+        registry.unregister(name)
+    forget_plugin(str(path))
+
+
+def tiny_grid(lights=(0.25, 0.5), motions=(8, 16), seeds=(0,)):
+    return grids.Grid(
+        scenes=(grids.scene_entry("pan:camera", SIZE),), lights=lights, motions=motions,
+        noises=("none",), seeds=seeds, effects=grids.DEFAULT_EFFECTS,
+    )
+
+
+def tiny_spec(methods, **grid_kw):
+    return SweepSpec(name="tiny", grid=tiny_grid(**grid_kw), methods=tuple(methods),
+                     sensor=SensorConfig(planes=PLANES))
+
+
+def quiet(plugin, **kw):
+    return Execution(plugins=(plugin,), progress=False, report=False, **kw)
+
+
+def same_numbers(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Equal in every column except the timing columns (which measure each run anew)."""
+    pd.testing.assert_frame_equal(drop_timing(a), drop_timing(b), check_exact=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# Grids
+# ----------------------------------------------------------------------------------------------
+
+def test_presets_match_the_paper_axes():
+    light = grids.preset("light")
+    assert light.lights == (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2) and light.motions == (128,)
+    motion = grids.preset("motion")
+    assert motion.motions == (16, 32, 64, 128, 256) and motion.lights == (0.25,)
+    noise = grids.preset("noise")
+    assert noise.noises == ("small", "medium", "high") and noise.lights == (0.25,) and noise.motions == (128,)
+    cells = light.cells()
+    assert len(cells) == len(grids.QUICK_SCENES) * 5
+    assert [c.condition.light for c in cells[:5]] == list(light.lights)
+    assert {c.scene.spec.size for c in cells} == {grids.QUICK_SIZE}
+    full = grids.preset("light", full=True)
+    assert {c.scene.spec.size for c in full.cells()} == {(400, 250)}
+    assert {s.kind for s in full.scenes} == {"pan", "zoom", "fan", "still"}
+    from neuspike.scenes import TEST_PHOTOS
+
+    assert {s.image for s in full.scenes} <= set(TEST_PHOTOS)
+
+
+def test_grid_rejects_bad_axes():
+    with pytest.raises(InputError, match="divide"):
+        grids.preset("motion").check_planes(100)
+    with pytest.raises(InputError, match="kind"):
+        grids.scene_entry("spin:camera", SIZE)
+    with pytest.raises(InputError, match="repeats"):
+        tiny_grid(lights=(0.25, 0.25))
+    with pytest.raises(InputError, match="fraction"):
+        grids.parse_fraction("1/0")
+    assert grids.parse_fraction("1/32") == 1 / 32 and grids.parse_size("346x260") == (346, 260)
+
+
+# ----------------------------------------------------------------------------------------------
+# A sweep end to end
+# ----------------------------------------------------------------------------------------------
+
+def _unpack_cached(cache_dir: Path) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """(mean-rate image, ground truth, gain) of every cached recording, read with NumPy alone."""
+    out = []
+    for path in sorted(cache_dir.glob("*.npz")):
+        with np.load(path) as z:
+            t, h, w = z["spike_shape"]
+            planes = np.unpackbits(z["spike_bits"], axis=-1, count=int(w), bitorder="little")
+            spike_info = json.loads(z["spike_json"].tobytes())
+            gt = np.clip(z["ground_truth"], 0, 1)
+        rate = planes.reshape(t, h, w).mean(axis=0, dtype=np.float64) / spike_info["gain"]
+        out.append((np.clip(rate, 0, 1).astype(np.float32), gt, spike_info["gain"]))
+    return out
+
+
+def test_tiny_sweep_runs_end_to_end(plugin, tmp_path):
+    spec = tiny_spec(["ht-mean", "ht-unavailable"])
+    outcome = run_sweep(spec, tmp_path / "run", quiet(plugin))
+    assert outcome.exit_code == 0 and (outcome.n_ok, outcome.n_failed, outcome.n_missing) == (4, 0, 0)
+    frame = read_csv(outcome.results_path)
+    assert list(frame.columns) == list(COLUMNS)
+    assert len(frame) == 4 * 2 * 4  # cells x methods x metrics
+    assert sorted(frame["metric"].unique()) == ["psnr", "psnr_affine", "ssim", "ssim_affine"]
+    assert set(zip(frame["light"], frame["motion"])) == {(0.25, 8), (0.25, 16), (0.5, 8), (0.5, 16)}
+
+    # the skipped method: rows with the reason, not a failure; its modality is not simulated
+    skipped = frame[frame["method"] == "ht-unavailable"]
+    assert (skipped["status"] == "skipped").all() and skipped["value"].isna().all()
+    assert skipped["error"].str.contains("weights not given").all()
+    assert "ht-unavailable" in outcome.skipped
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert config["sweep"]["resolved"]["modalities"] == ["spikes"]
+
+    mean = frame[frame["method"] == "ht-mean"]
+    assert (mean["status"] == "ok").all() and (mean["normalisation"] == "gain").all()
+    assert (mean["ms_per_frame"] > 0).all() and (mean["sim_seconds"] > 0).all()
+    assert mean["effects"].str.contains("spikes:initial_charge").all()
+    assert not mean["effects"].str.contains("events:").any()
+
+    # independent check of the plumbing: PSNR from the cached recordings, read with NumPy alone
+    expected = sorted(10 * np.log10(1.0 / np.mean((img.astype(np.float64) - gt) ** 2))
+                      for img, gt, _ in _unpack_cached(tmp_path / "run" / "cache"))
+    got = sorted(mean[mean["metric"] == "psnr"]["value"])
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    gains = sorted({g for _, _, g in _unpack_cached(tmp_path / "run" / "cache")})
+    assert gains == [0.25, 0.5]
+
+    meta = json.loads((tmp_path / "run" / "metadata.json").read_text())
+    for key in ("source", "versions", "machine", "threads_per_worker", "start", "end", "executor"):
+        assert key in meta
+    assert meta["end"] >= meta["start"] and meta["versions"]["numpy"] == np.__version__
+
+
+def test_failing_method_gives_error_rows_and_nonzero_exit(plugin, tmp_path, monkeypatch):
+    args = ["--axis", "light", "--lights", "1/4", "--motions", "16", "--planes", str(PLANES),
+            "--size", "32x24", "--scenes", "pan:camera", "--methods", "ht-mean,ht-fail",
+            "--plugin", plugin, "--no-report", "--no-progress"]
+    assert main(args + ["--out", str(tmp_path / "a")]) == 1
+    frame = read_csv(tmp_path / "a" / "results.csv")
+    failed = frame[frame["method"] == "ht-fail"]
+    assert len(failed) == 4 and (failed["status"] == "error").all() and failed["value"].isna().all()
+    assert failed["error"].str.contains("RuntimeError: deliberate failure").all()
+    assert (frame[frame["method"] == "ht-mean"]["status"] == "ok").all()
+    assert "deliberate failure" in next((tmp_path / "a" / "errors").glob("*.txt")).read_text()
+    # allowed failures exit 0; the rerun finds the cell finished and computes nothing
+    assert main(args + ["--out", str(tmp_path / "a"), "--allow-failures"]) == 0
+    # once the method is fixed, --retry-failed runs the failed cell again
+    monkeypatch.setenv("HT_FIXED", "1")
+    assert main(args + ["--out", str(tmp_path / "a"), "--retry-failed"]) == 0
+    assert (read_csv(tmp_path / "a" / "results.csv")["status"] == "ok").all()
+    assert not list((tmp_path / "a" / "errors").glob("*.txt"))
+    # a skipped method alone is not a failure
+    ok_args = [a if a != "ht-mean,ht-fail" else "ht-mean,ht-unavailable" for a in args]
+    assert main(ok_args + ["--out", str(tmp_path / "b")]) == 0
+
+
+def test_same_seed_same_numbers_and_seeds_differ(plugin, tmp_path):
+    spec = tiny_spec(["ht-mean"], seeds=(0, 1))
+    a = read_csv(run_sweep(spec, tmp_path / "a", quiet(plugin, use_cache=False)).results_path)
+    b = read_csv(run_sweep(spec, tmp_path / "b", quiet(plugin, use_cache=False)).results_path)
+    same_numbers(a, b)
+    psnr = a[a["metric"] == "psnr"].set_index(["light", "motion", "seed"])["value"]
+    # the random initial charge differs between seeds, so the numbers do
+    assert (psnr.xs(0, level="seed") != psnr.xs(1, level="seed")).all()
+
+
+def test_adding_a_method_reuses_the_cached_recordings(plugin, tmp_path):
+    cache = tmp_path / "cache"
+    first = run_sweep(tiny_spec(["ht-mean"]), tmp_path / "a", quiet(plugin, cache_dir=cache))
+    assert first.n_cache_hits == 0
+    stamps = {p.name: p.stat().st_mtime_ns for p in cache.glob("*.npz")}
+    assert len(stamps) == 4
+    second = run_sweep(tiny_spec(["ht-mean", "ht-mean-x2"]), tmp_path / "b", quiet(plugin, cache_dir=cache))
+    assert second.n_cache_hits == 4 and second.n_computed == 4
+    assert {p.name: p.stat().st_mtime_ns for p in cache.glob("*.npz")} == stamps
+    a, b = read_csv(first.results_path), read_csv(second.results_path)
+    b_mean = b[b["method"] == "ht-mean"].reset_index(drop=True)
+    same_numbers(a.drop(columns="cell"), b_mean.drop(columns="cell"))
+    # a damaged cache file is simulated again (and replaced), with the same numbers
+    victim = sorted(cache.glob("*.npz"))[0]
+    victim.write_bytes(victim.read_bytes()[:100])
+    third = run_sweep(tiny_spec(["ht-mean"]), tmp_path / "c", quiet(plugin, cache_dir=cache))
+    assert third.n_cache_hits == 3 and victim.stat().st_size > 100
+    same_numbers(a, read_csv(third.results_path))
+
+
+def test_changed_config_is_refused_unless_forced(plugin, tmp_path):
+    run_sweep(tiny_spec(["ht-mean"], lights=(0.5,), motions=(16,)), tmp_path / "a", quiet(plugin))
+    other = tiny_spec(["ht-mean"], lights=(0.25,), motions=(16,))
+    with pytest.raises(ConfigMismatch, match="lights"):
+        run_sweep(other, tmp_path / "a", quiet(plugin))
+    outcome = run_sweep(other, tmp_path / "a", quiet(plugin, force=True))
+    frame = read_csv(outcome.results_path)
+    assert set(frame["light"]) == {0.25} and len(list((tmp_path / "a" / "parts").glob("*.csv"))) == 1
+
+
+def test_cache_round_trip_is_bit_exact(tmp_path):
+    from neuspike.rng import derive_rng
+    from neuspike.scenes import make_scene
+    from neuspike.simulate import simulate_window
+
+    cell = tiny_grid(lights=(0.25,), motions=(8,)).cells()[0]
+    rec = simulate_window(make_scene(cell.scene.spec), cell.condition, rng=derive_rng(0, "t"),
+                          sensor=SensorConfig(planes=PLANES), history_s=0.002)
+    back = load_recording(save_recording(tmp_path / "r.npz", rec))
+    np.testing.assert_array_equal(back.spikes.planes, rec.spikes.planes)
+    assert back.spikes.gain == rec.spikes.gain and back.spikes.plane_rate_hz == rec.spikes.plane_rate_hz
+    for field in ("t_s", "x", "y", "p"):
+        a, b = getattr(back.events, field), getattr(rec.events, field)
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+    assert len(rec.events) > 0 and rec.events.t_s.min() < 0  # the history is kept
+    np.testing.assert_array_equal(back.ground_truth, rec.ground_truth)
+    assert (back.key_time_s, back.window_start_s, back.window_end_s) == (
+        rec.key_time_s, rec.window_start_s, rec.window_end_s)
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Resuming after a kill, and executors
+# ----------------------------------------------------------------------------------------------
+
+DRIVER = textwrap.dedent('''
+    import sys
+    from bench import grid as grids
+    from bench.sweep import Execution, SweepSpec, run_sweep
+    from neuspike.simulate import SensorConfig
+
+    plugin, out = sys.argv[1], sys.argv[2]
+    grid = grids.Grid(scenes=(grids.scene_entry("pan:camera", (32, 24)),), lights=(0.25, 0.5, 1.0),
+                      motions=(8, 16), seeds=(0,), effects=grids.DEFAULT_EFFECTS)
+    spec = SweepSpec(name="tiny", grid=grid, methods=("ht-mean",), sensor=SensorConfig(planes=32))
+    run_sweep(spec, out, Execution(plugins=(plugin,), progress=False, report=False))
+''')
+
+
+def test_kill_midway_then_rerun_equals_an_uninterrupted_run(plugin, tmp_path):
+    driver = tmp_path / "driver.py"
+    driver.write_text(DRIVER)
+    out = tmp_path / "killed"
+    env = {**os.environ, "HT_SLEEP_S": "0.3"}
+    proc = subprocess.Popen([sys.executable, str(driver), plugin, str(out)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    parts = out / "parts"
+    while time.monotonic() < deadline and proc.poll() is None and not list(parts.glob("*.csv")):
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    _, err = proc.communicate()
+    assert proc.returncode == -signal.SIGKILL, err.decode()[-2000:]
+    before = len(list(parts.glob("*.csv")))
+    assert 1 <= before < 6, "the kill must land midway"
+    for part in parts.glob("*.csv"):  # nothing half-written: every part parses, with all its rows
+        assert len(read_csv(part)) == 4
+    assert not (out / "results.csv").exists()
+
+    grid = grids.Grid(scenes=(grids.scene_entry("pan:camera", SIZE),), lights=(0.25, 0.5, 1.0),
+                      motions=(8, 16), seeds=(0,), effects=grids.DEFAULT_EFFECTS)
+    spec = SweepSpec(name="tiny", grid=grid, methods=("ht-mean",), sensor=SensorConfig(planes=PLANES))
+    resumed = run_sweep(spec, out, quiet(plugin))
+    assert resumed.n_computed == 6 - before and resumed.n_missing == 0
+    reference = run_sweep(spec, tmp_path / "whole", quiet(plugin))
+    assert reference.n_computed == 6
+    a, b = read_csv(resumed.results_path), read_csv(reference.results_path)
+    same_numbers(a, b)
+    assert set(TIMING_COLUMNS) <= set(a.columns)
+    meta = json.loads((out / "metadata.json").read_text())
+    assert len(meta["previous_runs"]) == 1 and meta["previous_runs"][0]["end"] is None
+
+
+def test_dask_gives_the_local_results(plugin, tmp_path):
+    pytest.importorskip("distributed")
+    from bench.executors import DaskExecutor
+
+    spec = tiny_spec(["ht-mean", "ht-fail"])
+    local = run_sweep(spec, tmp_path / "local", quiet(plugin))
+    dask = run_sweep(spec, tmp_path / "dask",
+                     quiet(plugin, executor=DaskExecutor(workers=1, processes=False), cache_dir=tmp_path / "c2"))
+    assert dask.n_computed == 4 and dask.n_cache_hits == 0 and dask.n_failed == 4
+    same_numbers(read_csv(local.results_path), read_csv(dask.results_path))
+    meta = json.loads((tmp_path / "dask" / "metadata.json").read_text())
+    assert meta["executor"]["executor"] == "dask"
+
+
+def test_worker_processes_give_the_in_process_results(plugin, tmp_path):
+    spec = tiny_spec(["ht-mean", "ht-fail"])
+    inline = run_sweep(spec, tmp_path / "inline", quiet(plugin))
+    pool = run_sweep(spec, tmp_path / "pool", quiet(plugin, workers=2, cache_dir=tmp_path / "c2"))
+    assert pool.n_computed == 4 and pool.n_failed == 4 and pool.n_missing == 0
+    same_numbers(read_csv(inline.results_path), read_csv(pool.results_path))
+    meta = json.loads((tmp_path / "pool" / "metadata.json").read_text())
+    assert meta["timing_contended"] is True and meta["threads_per_worker"] >= 1
+    assert meta["threads_observed"] == [meta["threads_per_worker"]]
+
+
+def test_dask_missing_gives_a_clear_error(monkeypatch):
+    from bench.executors import DaskExecutor
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if the extra were not installed
+    with pytest.raises(InputError, match=r"neuspike-bench\[dask\]"):
+        with DaskExecutor():
+            pass
+
+
+def test_reconstructions_of_the_swept_axis_are_saved_for_the_report(plugin, tmp_path):
+    report = pytest.importorskip("bench.report")
+    import matplotlib.image as mpimg
+
+    spec = SweepSpec(name="tiny", grid=tiny_grid(seeds=(0, 1)), methods=("ht-mean", "ht-fail"),
+                     sensor=SensorConfig(planes=PLANES), axis="light")
+    out = tmp_path / "run"
+    run_sweep(spec, out, quiet(plugin))
+    # one image set per light value: first seed, first motion (8), never the other cells
+    folders = sorted(p.name for p in (out / "images" / "pan_camera").iterdir())
+    assert folders == ["light=0.25", "light=0.5"]
+    for light in (0.25, 0.5):
+        names = sorted(p.name for p in report.image_path(out / "images", "pan:camera", "light", light, "gt").parent.iterdir())
+        assert names == ["gt.png", "ht-mean.png"]  # the failed method has no image
+    # the saved ground truth is the scene at the key instant, as cached (8-bit PNG: 2/255 tolerance)
+    gts = [gt for _, gt, _ in _unpack_cached(out / "cache")]
+    saved = np.asarray(mpimg.imread(report.image_path(out / "images", "pan:camera", "light", 0.5, "gt")))
+    saved = saved[..., 0] if saved.ndim == 3 else saved
+    assert saved.shape == gts[0].shape and np.abs(saved - gts[0]).max() <= 2 / 255
