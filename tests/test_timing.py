@@ -1,0 +1,237 @@
+"""Timing: median and spread on a fake timer, per-step figures of recurrent methods, Table 2 rows, the
+accuracy-versus-time join, and the speed targets of bench.method_speed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import method_speed, timing
+from bench import tables as tb
+from bench.results import base_row, rows_frame, to_csv_text
+from neuspike import methods as registry
+from neuspike.errors import InputError
+from neuspike.methods import Method, MethodUnavailable
+from neuspike.sample import Sample
+from neuspike.streams import SpikeStream
+
+
+def fake_timer(ns_values):
+    values = iter(ns_values)
+    return lambda: next(values)
+
+
+# ----------------------------------------------------------------------------------------------
+# Median and spread
+# ----------------------------------------------------------------------------------------------
+
+def test_time_callable_on_a_fake_timer():
+    calls, setups = [], []
+    # five timed calls lasting 5, 1, 3, 9 and 7 ms (the timer is read before and after each)
+    ticks = []
+    t = 1_000
+    for ms in (5, 1, 3, 9, 7):
+        ticks += [t, t + ms * 1_000_000]
+        t += 50_000_000
+    stats = timing.time_callable(lambda: calls.append(1), repeats=5, warmup=2, setup=lambda: setups.append(1),
+                                 timer=fake_timer(ticks))
+    assert stats.samples_ms == (5.0, 1.0, 3.0, 9.0, 7.0)
+    assert len(calls) == 7 and len(setups) == 7  # warm-up calls are made, set up, and not timed
+    s = stats.summary()
+    # sorted 1, 3, 5, 7, 9: median 5; quartiles at positions 1 and 3 (linear interpolation)
+    assert (s["median_ms"], s["min_ms"], s["max_ms"], s["q1_ms"], s["q3_ms"], s["n"]) == (5.0, 1.0, 9.0, 3.0, 7.0, 5)
+
+
+def test_summary_of_an_even_count_interpolates():
+    s = timing.summarize_ms([4.0, 1.0, 2.0, 3.0])
+    assert s["median_ms"] == 2.5 and s["q1_ms"] == 1.75 and s["q3_ms"] == 3.25
+
+
+@pytest.mark.parametrize("bad", [[], [1.0, -0.5], [float("nan")]])
+def test_summary_rejects_bad_timings(bad):
+    with pytest.raises(InputError):
+        timing.summarize_ms(bad)
+
+
+@pytest.mark.parametrize("kw", [{"repeats": 0, "warmup": 0}, {"repeats": 2, "warmup": -1}, {"repeats": 1.5, "warmup": 0}])
+def test_time_callable_rejects_bad_counts(kw):
+    with pytest.raises(InputError):
+        timing.time_callable(lambda: None, **kw)
+
+
+class FakeRecurrent:
+    """Stands in for a recurrent method that steps through four event windows per call."""
+
+    recurrent = True
+    inputs = frozenset({"events"})
+
+    def __init__(self):
+        self.resets = 0
+        self.windows_used = 0
+
+    def reset(self):
+        self.resets += 1
+
+    def reconstruct(self, sample):
+        self.windows_used = 4
+        return sample
+
+
+def test_time_method_divides_recurrent_calls_by_their_steps():
+    method = FakeRecurrent()
+    ticks = [0, 8_000_000, 10_000_000, 22_000_000, 30_000_000, 40_000_000]  # 8, 12, 10 ms
+    result = timing.time_method(method, "sample", repeats=3, warmup=1, timer=fake_timer(ticks))
+    assert method.resets == 4 and result.steps == 4
+    row = result.row()
+    assert row["median_ms"] == 10.0 and row["ms_per_frame"] == 2.5
+    assert row["min_frame_ms"] == 2.0 and row["max_frame_ms"] == 3.0 and row["steps"] == 4
+
+
+# ----------------------------------------------------------------------------------------------
+# Samples
+# ----------------------------------------------------------------------------------------------
+
+def test_cut_spike_window_keeps_the_planes_around_the_key_plane():
+    rng = np.random.default_rng(3)
+    planes = rng.random((10, 3, 4)) < 0.3
+    spikes = SpikeStream(planes, plane_rate_hz=100.0, start_s=0.0, gain=0.5, threshold=1.0)
+    sample = Sample(height=3, width=4, key_time_s=0.05, window_start_s=0.0, window_end_s=0.1, spikes=spikes)
+    assert sample.key_plane == 5
+    cut = timing.cut_spike_window(sample, 4)
+    np.testing.assert_array_equal(cut.spikes.planes, planes[3:7])
+    assert cut.spikes.start_s == pytest.approx(0.03) and cut.window_end_s == pytest.approx(0.07)
+    assert cut.key_plane == 2 and cut.spikes.gain == 0.5
+    with pytest.raises(InputError):
+        timing.cut_spike_window(sample, 12)
+
+
+# ----------------------------------------------------------------------------------------------
+# Table 2 rows with methods that work, fail and are unavailable
+# ----------------------------------------------------------------------------------------------
+
+class MeanRate(Method):
+    inputs = frozenset({"spikes"})
+
+    def _reconstruct(self, sample):
+        s = sample.spikes
+        return np.clip(s.planes.mean(axis=0) / s.gain, 0, 1).astype(np.float32), "gain"
+
+
+class Failing(Method):
+    inputs = frozenset({"spikes"})
+
+    def _reconstruct(self, sample):
+        raise RuntimeError("deliberate failure")
+
+
+class Unavailable(Method):
+    inputs = frozenset({"events"})
+
+    def __init__(self, name=None, **params):
+        raise MethodUnavailable("weights not given (test)")
+
+    def _reconstruct(self, sample):
+        raise AssertionError("never called")
+
+
+NAMES = {"tt-mean": MeanRate, "tt-fail": Failing, "tt-unavailable": Unavailable}
+
+
+@pytest.fixture
+def test_methods():
+    for name, cls in NAMES.items():
+        registry.register(name, cls)
+    yield tuple(NAMES)
+    for name in NAMES:
+        registry.unregister(name)
+
+
+def test_measure_gives_a_row_per_method_and_size(test_methods):
+    frame = timing.measure(test_methods, [(32, 24), (16, 12)], repeats=2, warmup=1, history_windows=0.0)
+    assert list(frame.columns) == list(timing.TIMING_COLUMNS) and len(frame) == 6
+    by = frame.set_index(["method", "resolution"])
+    ok = by.loc[("tt-mean", "32x24")]
+    assert ok["status"] == "ok" and ok["repeats"] == 2 and ok["min_ms"] <= ok["median_ms"] <= ok["max_ms"]
+    assert ok["ms_per_frame"] == ok["median_ms"] and ok["threads"] >= 1 and ok["family"] == "spike"
+    assert by.loc[("tt-fail", "16x12")]["status"] == "error"
+    assert "deliberate failure" in by.loc[("tt-fail", "16x12")]["error"]
+    skipped = by.loc[("tt-unavailable", "32x24")]
+    assert skipped["status"] == "skipped" and "weights not given (test)" in skipped["error"]
+    md = tb.timing_markdown(frame)
+    assert "| tt-mean | spike | - |" in md and "tt-unavailable (skipped)" in md and "| FireNet | CPU | 38,000 |" in md
+
+
+def results_for(method_psnr: dict[str, float], size=(32, 24)) -> pd.DataFrame:
+    rows = []
+    for method, p in method_psnr.items():
+        for metric, value in (("psnr", p), ("ssim", p / 40)):
+            rows.append(base_row(cell="c", scene="pan:camera", kind="pan", image="camera", width=size[0],
+                                 height=size[1], planes=256, light=0.25, motion=128, noise="none", seed=0,
+                                 method=method, inputs="spikes", parameters=0, metric=metric, value=value,
+                                 status="ok", ms_per_frame=1.0))
+    return rows_frame(rows)
+
+
+def test_join_accuracy_takes_the_sweeps_resolution_or_the_closest():
+    timing_rows = pd.DataFrame([
+        {"method": "a", "resolution": "32x24", "width": 32, "height": 24, "status": "ok", "ms_per_frame": 1.0},
+        {"method": "a", "resolution": "400x250", "width": 400, "height": 250, "status": "ok", "ms_per_frame": 9.0},
+        {"method": "b", "resolution": "240x180", "width": 240, "height": 180, "status": "ok", "ms_per_frame": 3.0},
+        {"method": "b", "resolution": "640x480", "width": 640, "height": 480, "status": "ok", "ms_per_frame": 30.0},
+        {"method": "c", "resolution": "32x24", "width": 32, "height": 24, "status": "skipped", "ms_per_frame": math.nan},
+    ])
+    joined = timing.join_accuracy(results_for({"a": 20.0, "b": 25.0, "c": 10.0}), timing_rows, "runs/x").set_index("method")
+    assert joined.loc["a", "ms_per_frame"] == 1.0 and joined.loc["a", "resolution"] == "32x24"
+    assert joined.loc["b", "ms_per_frame"] == 3.0 and joined.loc["b", "resolution"] == "240x180"
+    assert math.isnan(joined.loc["c", "ms_per_frame"]) and joined.loc["b", "psnr"] == 25.0
+
+
+def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
+    results = tmp_path / "sweep"
+    results.mkdir()
+    (results / "results.csv").write_text(to_csv_text(results_for({"tt-mean": 20.0})))
+    out = tmp_path / "timing"
+    code = timing.main(["--methods", "tt-mean,tt-unavailable", "--sizes", "32x24", "--repeats", "2", "--warmup", "0",
+                        "--history-windows", "0", "--results", str(results), "--out", str(out)])
+    assert code == 0
+    frame = pd.read_csv(out / "timing.csv")
+    assert set(frame["status"]) == {"ok", "skipped"}
+    assert "tt-unavailable (skipped): MethodUnavailable: weights not given (test)" in (out / "tables" / "timing.md").read_text()
+    acc = pd.read_csv(out / "accuracy_vs_time.csv")
+    assert acc["method"].tolist() == ["tt-mean"] and acc["psnr"].iloc[0] == 20.0
+    assert (out / "figures" / "accuracy_vs_time.png").exists() and (out / "report.pdf").read_bytes().startswith(b"%PDF")
+    for name in ("config.json", "metadata.json"):
+        assert (out / name).stat().st_size > 0
+    # the report rebuilds Table 2 from timing.csv alone, byte for byte
+    before = {n: (out / "tables" / n).read_bytes() for n in ("timing.md", "timing.csv", "accuracy_vs_time.md")}
+    from bench.report import build_report
+
+    build_report(out)
+    assert {n: (out / "tables" / n).read_bytes() for n in before} == before
+
+
+# ----------------------------------------------------------------------------------------------
+# bench.method_speed
+# ----------------------------------------------------------------------------------------------
+
+def test_speed_targets_cover_variants_and_nothing_else():
+    assert method_speed.target_of("tfp-w8").name == "tfp"
+    assert method_speed.target_of("firenet-plus").name == "firenet"
+    assert method_speed.target_of("tfstp").name == "tfstp"  # not caught by the tfp prefix
+    assert method_speed.target_of("events-integrate") is None
+    assert method_speed.target_of("tfi").limit_ms == 1.99
+
+
+def test_method_speed_rows_and_verdicts(test_methods, monkeypatch):
+    monkeypatch.setattr(method_speed, "WIDTH", 32)
+    monkeypatch.setattr(method_speed, "HEIGHT", 24)
+    frame = method_speed.measure(["tt-mean", "tt-fail", "tt-unavailable"], repeats=2, warmup=1)
+    by = frame.set_index("method")
+    assert by.loc["tt-mean", "status"] == "ok" and by.loc["tt-mean", "ms_41_median"] > 0
+    assert by.loc["tt-mean", "verdict"] == "-" and by.loc["tt-fail", "status"] == "error"
+    assert by.loc["tt-unavailable", "status"] == "skipped"
+    text = method_speed.markdown(frame, 2, 1, "cpu")
+    assert "| tt-mean |" in text and "tt-unavailable (skipped): MethodUnavailable" in text
