@@ -134,7 +134,8 @@ def test_cover_resize_and_centre_crop(tmp_path):
     # 100 x 50 column ramp onto a 40 x 40 view: scaled to 80 x 40, columns 20..59 kept
     values = np.tile(np.arange(100) * 600, (50, 1))
     image = load_photo(write_png16(tmp_path / "cols.png", values), (40, 40))
-    expected = cv2.resize((values / 65535.0).astype(np.float32), (80, 40), interpolation=cv2.INTER_AREA)[:, 20:60]
+    scaled = cv2.resize((values / 65535.0).astype(np.float32), (80, 40), interpolation=cv2.INTER_AREA)
+    expected = scaled[:, 20:60]
     np.testing.assert_allclose(image, expected, atol=1e-6)
 
 

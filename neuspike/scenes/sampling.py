@@ -154,6 +154,7 @@ def sample_translated(extended: np.ndarray, plane_hw: tuple[int, int], x0s: np.n
         a, b = int(iy[t]), int(ix[t])
         wx, wy = fx[t], fy[t]
         top = e[a:a + height, b:b + width] * (1 - wx) + e[a:a + height, b + 1:b + width + 1] * wx
-        bottom = e[a + 1:a + height + 1, b:b + width] * (1 - wx) + e[a + 1:a + height + 1, b + 1:b + width + 1] * wx
+        below = e[a + 1:a + height + 1]
+        bottom = below[:, b:b + width] * (1 - wx) + below[:, b + 1:b + width + 1] * wx
         np.add(top * (1 - wy), bottom * wy, out=out[t])
     return out

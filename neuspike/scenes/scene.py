@@ -39,7 +39,8 @@ def check_times(times_s: Any) -> np.ndarray:
         raise InputError(f"times_s: expected real numbers, got dtype {t.dtype}")
     t = t.astype(np.float64)
     if not np.isfinite(t).all():
-        raise InputError(f"times_s: expected finite times, got {int(np.count_nonzero(~np.isfinite(t)))} NaN or infinite")
+        bad = int(np.count_nonzero(~np.isfinite(t)))
+        raise InputError(f"times_s: expected finite times, got {bad} NaN or infinite")
     return t
 
 

