@@ -133,8 +133,10 @@ def plugin_names(extra: tuple[str, ...] = ()) -> tuple[str, ...]:
 def load_plugins(plugins: tuple[str, ...]) -> list[str]:
     """Import each plug-in once per process; return the names newly imported.
 
-    A plug-in is a module that registers methods when imported. It is named by its dotted module
-    name (importable on the worker's ``sys.path``) or by a path to a ``.py`` file.
+    A plug-in is a module that registers methods when imported, or that defines a function
+    ``register_methods()`` (the same callable a ``neuspike.methods`` entry point names), which is
+    then called once. It is named by its dotted module name (importable on the worker's
+    ``sys.path``) or by a path to a ``.py`` file.
 
     Raises
     ------
@@ -163,10 +165,13 @@ def load_plugins(plugins: tuple[str, ...]) -> list[str]:
                         raise
             else:
                 module = importlib.import_module(plugin)
+            hook = getattr(module, "register_methods", None)
+            if callable(hook):
+                hook()
         except InputError:
             raise
         except Exception as exc:
-            raise InputError(f"plug-in {plugin!r} failed to import: {type(exc).__name__}: {exc}") from exc
+            raise InputError(f"plug-in {plugin!r} failed to load: {type(exc).__name__}: {exc}") from exc
         _LOADED_PLUGINS[plugin] = module
         loaded.append(plugin)
     return loaded
