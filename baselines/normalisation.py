@@ -45,9 +45,13 @@ def rate_to_image(rate: np.ndarray, gain: float | None) -> tuple[np.ndarray, str
     image : float32 (H, W) in [0, 1]
     label : ``"gain"`` or ``"robust-p99"``
     """
-    rate = np.nan_to_num(np.asarray(rate, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    rate = np.asarray(rate)
+    if not np.isfinite(rate).all():
+        rate = np.nan_to_num(rate.astype(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
     if gain is not None:
-        image, label = rate / float(gain), GAIN
+        scale, label = float(gain), GAIN
     else:
-        image, label = rate / robust_scale(rate), ROBUST
-    return np.clip(image, 0.0, 1.0).astype(np.float32), label
+        scale, label = robust_scale(rate), ROBUST
+    # divide in float64, then clip the float32 image in place (one allocation each)
+    image = np.divide(rate, scale, dtype=np.float64).astype(np.float32)
+    return np.clip(image, 0.0, 1.0, out=image), label

@@ -126,6 +126,12 @@ def spike_count(planes: np.ndarray) -> np.ndarray:
     n = planes.shape[0]
     u8 = planes.view(np.uint8)  # bool and uint8 share their layout: 0 or 1 per byte
     if n <= _UINT8_PLANES:
+        hw = planes.shape[1] * planes.shape[2]
+        if hw % 8 == 0 and planes.flags.c_contiguous:
+            # Eight pixels per 64-bit word: each byte lane sums at most 255 ones, so no carry
+            # crosses into the next pixel, and viewing the word sums as bytes gives the counts.
+            words = u8.reshape(n, hw // 8 * 8).view(np.uint64)
+            return np.add.reduce(words, axis=0).view(np.uint8).reshape(planes.shape[1:])
         return np.add.reduce(u8, axis=0, dtype=np.uint8)
     count = np.zeros(planes.shape[1:], dtype=np.uint32)
     for s in range(0, n, _UINT8_PLANES):

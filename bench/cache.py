@@ -35,6 +35,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from neuspike.atomic import publish
 from neuspike.errors import FormatError
 
 CACHE_FORMAT = "neuspike-recording-cache/1"
@@ -81,7 +82,7 @@ def write_bytes_atomic(path: str | os.PathLike, write: Callable[[Any], None]) ->
             write(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)

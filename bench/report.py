@@ -56,6 +56,7 @@ from bench import figures as figs
 from bench import tables as tb
 from bench.cache import write_bytes_atomic, write_text_atomic
 from bench.claims import claims_markdown, evaluate_claims
+from neuspike.atomic import publish
 from neuspike.errors import InputError
 
 #: Resolution of the reconstruction grids' PNGs (each cell about 220 pixels wide).
@@ -505,7 +506,7 @@ def _write_pdf(path: Path, pages: Sequence[Any]) -> None:
         with PdfPages(tmp, metadata={"Creator": "NeuSpike Bench", "CreationDate": None}) as pdf:
             for page in pages:
                 pdf.savefig(page)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)

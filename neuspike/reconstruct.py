@@ -27,6 +27,7 @@ from typing import Any, Callable, Sequence, TextIO
 
 import numpy as np
 
+from neuspike.atomic import publish
 from neuspike.errors import InputError, NeuSpikeError
 
 #: Environment variable naming the folder of learned methods' weights (``--weights`` overrides it).
@@ -188,7 +189,7 @@ def _write_atomic(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

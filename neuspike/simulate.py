@@ -23,17 +23,18 @@ Every recording's metadata lists the stages that ran with their parameters and w
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import sys
-import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from neuspike.atomic import write_bytes, write_text
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
@@ -349,15 +350,7 @@ def simulate_sequence(
 # --------------------------------------------------------------------------------------------
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=2, sort_keys=True, default=_json_default)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(path, json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
 
 
 def _json_default(value: Any) -> Any:
@@ -380,26 +373,14 @@ def write_png_atomic(path: Path, image01: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", img8)
     if not ok:
         raise NeuSpikeError(f"could not encode {path} as PNG")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(buf.tobytes())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, buf.tobytes())
 
 
 def write_npy_atomic(path: Path, array: np.ndarray) -> None:
     """``np.save`` through a temporary file in the same folder."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.save(f, array)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    buf = io.BytesIO()
+    np.save(buf, array)
+    write_bytes(path, buf.getvalue())
 
 
 def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[str, Path]:
@@ -494,10 +475,7 @@ def write_sequence(
         name = f"frame_{i:06d}.png"
         write_png_atomic(frames_dir / name, img)
         lines.append(f"{i} {(t - start_s) / time_scale:.9f} {t:.9f} {name}")
-    fd, tmp = tempfile.mkstemp(dir=frames_dir, prefix=".timestamps.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write("\n".join(lines) + "\n")
-    os.replace(tmp, frames_dir / "timestamps.txt")
+    write_text(frames_dir / "timestamps.txt", "\n".join(lines) + "\n")
     meta["files"] = {**({"spikes": "spikes.dat"} if dat else {}), **({"events": "events.h5"} if h5 else {}),
                      "frames": "frames/timestamps.txt"}
     meta["ground_truth_frames"] = len(frame_times)

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from neuspike.atomic import publish
 from neuspike.checks import check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import P_DTYPE, T_DTYPE, XY_DTYPE, EventStream
@@ -345,7 +346,7 @@ def _atomic(path: str | os.PathLike, write) -> Path:
     tmp = _temp_path(target)
     try:
         write(tmp)
-        os.replace(tmp, target)
+        publish(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -503,7 +504,7 @@ class EventsH5Writer:
             _h5_attrs(self._file, self.width, self.height, t, self._num_pos, self.count - self._num_pos)
             self._file.close()
             self._file = None
-            os.replace(self._tmp, self.path)
+            publish(self._tmp, self.path)
         except BaseException:
             self.abort()
             raise

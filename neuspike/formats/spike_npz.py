@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from neuspike.atomic import publish
 from neuspike.checks import check_positive
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
@@ -180,7 +181,7 @@ def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
             np.savez_compressed(f, **arrays)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, target)
+        publish(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from neuspike.atomic import publish
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
@@ -155,7 +156,7 @@ class DatWriter:
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
-            os.replace(self._tmp, self._path)
+            publish(self._tmp, self._path)
         except BaseException:
             self.abort()
             raise

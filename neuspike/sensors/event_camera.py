@@ -676,7 +676,6 @@ class _Capture:
         """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel."""
         cam = self.cam
         d1, act = self.d1, self.act
-        P = cam._pix_bits
         # crossing fractions in units of 2**-q_bits of the interval: 2**-44, or coarser where two
         # float64 ulps of the timestamp are coarser (then distinct fractions stay distinct times)
         t_max = max(abs(t_a), abs(t_a + dt))

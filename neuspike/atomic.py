@@ -1,0 +1,52 @@
+"""Writing files so that nothing is ever half-written.
+
+Every writer in the suite writes into a temporary file in the destination's folder and then
+renames it over the destination (``os.replace`` is atomic on one file system). :func:`publish`
+does that rename and first gives the file the permissions an ordinary ``open`` would have
+(``0o666`` less the process umask): ``tempfile.mkstemp`` creates files readable only by their
+owner, which would leak into every output.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_umask()
+
+
+def temp_beside(path: str | os.PathLike) -> tuple[int, str]:
+    """``(fd, name)`` of a new temporary file in ``path``'s folder (hidden, ``.tmp`` suffix)."""
+    p = Path(path)
+    return tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+
+
+def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Give ``tmp`` ordinary file permissions and rename it over ``path`` atomically."""
+    os.chmod(tmp, _FILE_MODE)
+    os.replace(tmp, path)
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically; on any error the destination is untouched."""
+    fd, tmp = temp_beside(path)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        publish(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    write_bytes(path, text.encode("utf-8"))
