@@ -29,13 +29,12 @@ import dataclasses
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.atomic import replacing
 from neuspike.errors import FormatError
 
 CACHE_FORMAT = "neuspike-recording-cache/1"
@@ -76,19 +75,10 @@ def write_bytes_atomic(path: str | os.PathLike, write: Callable[[Any], None]) ->
     which then replaces ``path`` in one step. A crash leaves either the old file or the new one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        publish(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    with replacing(path) as tmp, open(tmp, "wb") as f:
+        write(f)
+        f.flush()
+        os.fsync(f.fileno())
     return path
 
 

@@ -44,7 +44,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -56,7 +55,7 @@ from bench import figures as figs
 from bench import tables as tb
 from bench.cache import write_bytes_atomic, write_text_atomic
 from bench.claims import claims_markdown, evaluate_claims
-from neuspike.atomic import publish
+from neuspike.atomic import replacing
 from neuspike.errors import InputError
 
 #: Resolution of the reconstruction grids' PNGs (each cell about 220 pixels wide).
@@ -500,19 +499,9 @@ def _write_pdf(path: Path, pages: Sequence[Any]) -> None:
     from matplotlib.backends.backend_pdf import PdfPages
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        with PdfPages(tmp, metadata={"Creator": "NeuSpike Bench", "CreationDate": None}) as pdf:
-            for page in pages:
-                pdf.savefig(page)
-        publish(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
+    with replacing(path) as tmp, PdfPages(tmp, metadata={"Creator": "NeuSpike Bench", "CreationDate": None}) as pdf:
+        for page in pages:
+            pdf.savefig(page)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -19,7 +19,6 @@ import argparse
 import inspect
 import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +26,7 @@ from typing import Any, Callable, Sequence, TextIO
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.atomic import write_bytes
 from neuspike.errors import InputError, NeuSpikeError
 
 #: Environment variable naming the folder of learned methods' weights (``--weights`` overrides it).
@@ -185,14 +184,7 @@ def _accepts_weights(factory: Callable[..., Any]) -> bool:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, data)
 
 
 def write_outputs(out: Path, name: str, image: np.ndarray) -> tuple[Path, Path]:
