@@ -273,6 +273,28 @@ def test_bfloat16_stays_close_to_float32(pan_sample):
     assert ssim(b, a, data_range=1.0) > 0.95
 
 
+def test_gradients_flow_and_match_the_inference_path():
+    module = FireNetModule()
+    rng = np.random.default_rng(3)
+    x = torch.from_numpy(random_grid(rng, 9, 11))[None]
+    with torch.inference_mode():
+        expected, _ = module(x, module(x)[1])
+    out, _ = module(x, module(x)[1])  # with autograd: the in-place shortcut must not be taken
+    out.sum().backward()
+    torch.testing.assert_close(out.detach(), expected)
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in module.parameters())
+
+
 def test_module_has_the_published_parameter_count():
     assert sum(p.numel() for p in FireNetModule().parameters()) == PARAMETERS
     assert firenet_module.CHANNELS == 16
+
+
+@needs_weights
+@pytest.mark.parametrize("native, expected", [(True, "bfloat16"), (False, "float32")])
+def test_auto_precision_follows_the_cpu_and_is_recorded(monkeypatch, native, expected):
+    import baselines.firenet as fn
+
+    monkeypatch.setattr(fn, "native_bfloat16", lambda: native)
+    method = fn.FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS)
+    assert method.params["precision"] == expected
