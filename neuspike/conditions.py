@@ -132,6 +132,46 @@ def parse_effects(text: str) -> tuple[Effect, ...]:
     return tuple(effects)
 
 
+def declared_stages(effects: Iterable[Effect] | Effect, *, stages: Iterable[str], camera: str) -> dict[str, Effect]:
+    """Check a camera's declared effects and index them by name.
+
+    Parameters
+    ----------
+    effects : Effect or iterable of Effect
+    stages : iterable of str
+        The effect names this camera implements.
+    camera : str
+        The camera's name for messages, e.g. ``"spike-camera"``.
+
+    Raises
+    ------
+    InputError
+        For something that is not an :class:`Effect`, an effect this camera does not implement,
+        or an effect declared twice.
+    """
+    names = tuple(stages)
+    if isinstance(effects, Effect):
+        effects = (effects,)
+    try:
+        items = tuple(effects)
+    except TypeError:
+        raise InputError(f"effects: expected a sequence of Effect objects, got {effects!r}") from None
+    article = "an" if camera[:1] in "aeiou" else "a"
+    by_name: dict[str, Effect] = {}
+    for e in items:
+        if not isinstance(e, Effect):
+            raise InputError(f"effects: expected Effect objects (neuspike.conditions.effect), got {e!r}")
+        if e.name not in names:
+            raise InputError(
+                f"effects: {e.name!r} is a {e.modality} effect, not {article} {camera} effect; "
+                f"the {camera} has {', '.join(names)}"
+            )
+        if e.name in by_name:
+            raise InputError(f"effects: {e.name!r} is declared twice")
+        by_name[e.name] = e
+    return by_name
+
+
 #: The paper's noise levels (supplement §3; Table 3), each a preset that declares its stages.
 NOISE_LEVELS: Mapping[str, tuple[Effect, ...]] = MappingProxyType({
     "none": (),

@@ -71,7 +71,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from neuspike.checks import check_positive, check_positive_int
-from neuspike.conditions import EVENTS, Effect
+from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
 from neuspike.streams import EventStream
 
@@ -162,33 +162,6 @@ def log_intensity(intensity: Any) -> np.ndarray:
     return _lin_log_into(x8, np.empty_like(x8), np.empty_like(x8), np.float32(DARK_FLOOR_8BIT), _LIN_SLOPE)
 
 
-def _validate_effects(effects: Iterable[Effect]) -> dict[str, Effect]:
-    if isinstance(effects, Effect):
-        effects = (effects,)
-    try:
-        items = tuple(effects)
-    except TypeError:
-        raise InputError(f"effects: expected a sequence of Effect objects, got {effects!r}") from None
-    by_name: dict[str, Effect] = {}
-    for e in items:
-        if not isinstance(e, Effect):
-            raise InputError(f"effects: expected Effect objects (neuspike.conditions.effect), got {e!r}")
-        if e.modality != EVENTS:
-            raise InputError(
-                f"effects: {e.name!r} is a {e.modality} effect; the event camera takes only "
-                f"{', '.join(_STAGE_ORDER)}"
-            )
-        if e.name in by_name:
-            raise InputError(f"effects: {e.name!r} is declared twice")
-        by_name[e.name] = e
-    return by_name
-
-
-def _stream_from_valid_arrays(t, x, y, p, width, height, meta) -> EventStream:
-    """An :class:`EventStream` from arrays the simulator guarantees valid (sorted, in range)."""
-    return EventStream.trusted(t, x, y, p, width, height, meta)
-
-
 class EventCamera:
     """A DVS event camera with explicit pixel state (see the module docstring for the model).
 
@@ -238,7 +211,7 @@ class EventCamera:
         self.light = check_positive("EventCamera light", light)
         self.threshold_on = check_positive("threshold_on", threshold_on)
         self.threshold_off = check_positive("threshold_off", threshold_off)
-        self._effects = _validate_effects(effects)
+        self._effects = declared_stages(effects, stages=_STAGE_ORDER, camera="event-camera")
         random_stages = [n for n in _RANDOM_STAGES if n in self._effects]
         if random_stages and not isinstance(rng, np.random.Generator):
             raise InputError(
@@ -912,4 +885,4 @@ class _Capture:
                 params = dict(cam._effects[name].params)
             stages.append({"name": name, "params": params, "seconds": seconds})
         meta = {"stages": stages, "event_count": int(t.shape[0])}
-        return _stream_from_valid_arrays(t, x, y, p, cam.width, cam.height, meta)
+        return EventStream.trusted(t, x, y, p, cam.width, cam.height, meta)

@@ -35,7 +35,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from neuspike.checks import check_ndim, check_nonnegative, check_positive, check_positive_int, check_size
-from neuspike.conditions import SPIKES, Effect
+from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
@@ -327,27 +327,6 @@ def draw_dark_charge(
     return (phi / isi).astype(np.float32)
 
 
-def _spike_effects(effects: Iterable[Effect]) -> dict[str, Effect]:
-    try:
-        items = tuple(effects)
-    except TypeError:
-        raise InputError(f"effects: expected a tuple of Effect, got {effects!r}") from None
-    by_name: dict[str, Effect] = {}
-    for e in items:
-        if not isinstance(e, Effect):
-            raise InputError(f"effects: expected Effect objects (neuspike.conditions.effect), got {e!r}")
-        if e.name not in SPIKE_STAGES:
-            raise InputError(
-                f"effects: {e.name!r} is not a spike-camera effect; the spike camera has {', '.join(SPIKE_STAGES)}"
-            )
-        if e.name in by_name:
-            raise InputError(f"effects: {e.name!r} is declared twice")
-        if e.modality != SPIKES:  # pragma: no cover - guarded by EFFECT_DEFAULTS
-            raise InputError(f"effects: {e.name!r} belongs to the {e.modality} modality")
-        by_name[e.name] = e
-    return by_name
-
-
 class SpikeCamera:
     """A spike camera: parameters, the frozen dark pattern and the charge carried between captures.
 
@@ -391,7 +370,7 @@ class SpikeCamera:
         _as_float32("light", self._light)
         _as_float32("threshold", self._threshold)
         self._plane_rate_hz = check_positive("plane_rate_hz", plane_rate_hz)
-        declared = _spike_effects(effects)
+        declared = declared_stages(effects, stages=SPIKE_STAGES, camera="spike-camera")
         if declared or rng is not None:
             rng = _check_rng(rng)
         shape = (self._height, self._width)
