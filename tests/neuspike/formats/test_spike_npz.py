@@ -11,8 +11,8 @@ import pytest
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats.spike_npz import read_spike_npz, write_spike_npz
 from neuspike.streams import SpikeStream
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 UHSR = SHARED / "realdata" / "spike" / "uhsr_helicopter.npz"
 
 

@@ -34,8 +34,10 @@ from neuspike.errors import InputError
 from neuspike.metrics import affine_fit
 from neuspike.sample import Sample
 from neuspike.streams import EventStream, SpikeStream
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 WEIGHTS = SHARED / "weights"
 HAVE_WEIGHTS = (WEIGHTS / "firenet" / "firenet.pt").is_file() and (WEIGHTS / "firenet" / "firenet_plus.pt").is_file()
 
@@ -92,16 +94,6 @@ def random_events(rng: np.random.Generator, n: int, height: int, width: int, t0:
     return EventStream(t, rng.integers(0, width, n), rng.integers(0, height, n), rng.choice(np.array([-1, 1]), n),
                        width, height)
 
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """FireNet's many small convolutions on one thread: on a shared 2-core machine a second OpenMP
-    thread waiting for a busy core makes each step an order of magnitude slower."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 # --- events-integrate ----------------------------------------------------------------------------
 

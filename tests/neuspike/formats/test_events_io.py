@@ -21,8 +21,8 @@ from neuspike.formats.events_io import (
     write_events_txt,
 )
 from neuspike.streams import EventStream
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 PKU = SHARED / "realdata" / "events" / "pku_vidar_dvs_driving_outdoor3.hdf5"
 AEDAT = SHARED / "realdata" / "events" / "dvxplorer_sample.aedat4"
 

@@ -13,8 +13,8 @@ import pytest
 from neuspike.errors import InputError, SourceError
 from neuspike.recordings import DEFAULT_WINDOW_PLANES, EVENT_HISTORY_S, load_ground_truth, load_sample
 from neuspike.streams import EventStream
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 REAL = SHARED / "realdata"
 
 

@@ -34,8 +34,10 @@ from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.simulate import simulate_window
 from neuspike.streams import EventStream
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 WEIGHTS = SHARED / "weights"
 FILES = {"firenet.pt": "legacy", "firenet_plus.pt": "plus"}
 needs_weights = pytest.mark.skipif(
@@ -52,16 +54,6 @@ def random_grid(rng: np.random.Generator, height: int, width: int) -> np.ndarray
     grid = rng.standard_normal((NUM_BINS, height, width)).astype(np.float32)
     return grid * (rng.random(grid.shape) < 0.3)
 
-
-
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """FireNet's many small convolutions on one thread: on a shared 2-core machine a second OpenMP
-    thread waiting for a busy core makes each step an order of magnitude slower."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 # --- a reference forward pass written from the published description, in the file's own names ----
 

@@ -22,8 +22,8 @@ from neuspike.scenes import (
     make_scene,
     mirror_index,
 )
+from tests.shared_data import SHARED
 
-SHARED = Path(os.environ.get("NEUSPIKE_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 SLIDER = SHARED / "realdata" / "video" / "slider_depth"
 needs_slider = pytest.mark.skipif(not (SLIDER / "images.txt").is_file(), reason="shared slider_depth absent")
 
