@@ -49,7 +49,7 @@ import math
 
 import numpy as np
 
-from baselines.normalisation import ROBUST, ROBUST_PERCENTILE
+from neuspike.normalisation import ROBUST, ROBUST_PERCENTILE
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
 from neuspike.methods import Method

@@ -28,12 +28,13 @@ dictionary opened with ``torch.load(path, weights_only=True)``:
 tensor in the file is used, none of the module's is missing, and all shapes agree; anything else is
 a :class:`~neuspike.errors.FormatError` naming the offending keys.
 
-The weights' folder comes from the user: the ``weights_dir`` argument (the CLI's ``--weights``), or
-else the environment variable ``NEUSPIKE_WEIGHTS``. The file is looked up as
-``<dir>/firenet/<file>`` and then ``<dir>/<file>``, so either the weights root or the FireNet folder
-itself may be named. When no folder is given or the file is not there, constructing the method
-raises :class:`~neuspike.methods.MethodUnavailable` with the reason (the harness records it and
-skips the method).
+The weights come from the user: a folder passed as ``weights_dir`` (the commands' ``--weights``,
+or their ``NEUSPIKE_WEIGHTS`` variable), declared in the registry entry and resolved by
+:func:`neuspike.weights.resolve_weights`: the file is looked up as ``<dir>/firenet/<file>`` and then
+``<dir>/<file>``, so either the weights root or the FireNet folder itself may be named. When no
+folder is given or the file is not there, constructing the method raises
+:class:`~neuspike.weights.WeightsNotFound` (a :class:`~neuspike.methods.MethodUnavailable`) naming
+every path tried; the harness records the reason and skips the method.
 
 Event windows. The network is recurrent and needs several windows of warm-up. A reconstruction
 resets the state, then feeds the sample's events (history and window) up to the key instant as a
@@ -54,17 +55,12 @@ their estimate is also centred on it.
 Output: the readout clamped to [0, 1] (label ``"clamp"``), as FireNet's authors read it; no other
 normalisation.
 
-Precision: ``precision="auto"`` (default) picks ``"bfloat16"`` when the CPU has native bfloat16
-arithmetic (AVX512-BF16 or AMX, as torch reports it) and ``"float32"`` otherwise; the choice made is
-recorded in the method's ``params["precision"]``. ``precision="bfloat16"`` runs the convolutions in bfloat16 under CPU autocast;
-the recurrent states and their update stay float32. ``precision="float32"`` runs everything in
-float32. On this machine class (a CPU with AMX and AVX512-BF16 units), measured on a quiet machine,
-one step at 400x250 (voxel grid included) took 23-26 ms in bfloat16 against about 40 ms in float32
-with two threads (44 ms against 69 ms with one), which is what makes the 30 ms target reachable:
-the float32 convolutions already run near the cores' float32 peak (7.5 GFLOP per step). The cost in accuracy is negligible: after 24 windows of
-simulated pans the two outputs differ by 0.001-0.002 on average (SSIM between them 0.999 and
-above), and their SSIM to the ground truth differs by less than 0.001. On CPUs without bfloat16
-units bfloat16 is emulated and slower than float32, which is why ``"auto"`` falls back to float32.
+Precision follows the shared rule of :mod:`neuspike.learned`: ``"auto"`` (default) picks bfloat16
+where the device computes it natively and float32 elsewhere (emulated bfloat16 is slower than
+float32); the choice is recorded in ``params["precision"]``. In bfloat16 the convolutions run under
+autocast while the recurrent states and their update stay float32. The cost in accuracy is
+negligible: after 24 windows of simulated pans the two outputs differ by 0.001-0.002 on average
+(SSIM between them 0.999 and above), and their SSIM to the ground truth differs by less than 0.001.
 
 Speed: the update and reset gates of each GRU run as one convolution (:class:`ConvGRU`), and the
 residual blocks work in place. Torch's threads are left as the caller set them; on a machine whose
@@ -76,7 +72,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -85,91 +81,27 @@ from torch import nn
 
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
-from neuspike.methods import Method, MethodUnavailable
+from neuspike.learned import CLAMP, LearnedMethod
+from neuspike.nn import ConvGRU, ResidualBlock
 from neuspike.representations import voxel_grid
 from neuspike.sample import Sample
 from neuspike.streams import EventStream
+from neuspike.weights import load_state_strict, load_torch_state
 
 __all__ = [
-    "WEIGHTS_ENV",
     "NUM_BINS",
-    "ConvGRU",
-    "ResidualBlock",
     "FireNetModule",
     "map_state_dict",
     "load_firenet",
-    "find_weights",
     "event_windows",
     "FireNet",
     "register_methods",
 ]
 
-#: Environment variable naming the weights folder.
-WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
 #: Temporal bins of the voxel grid the network expects.
 NUM_BINS = 5
 #: Channels of every hidden layer.
 CHANNELS = 16
-#: Label of the output scale: the network's readout clamped to [0, 1].
-CLAMP = "clamp"
-
-
-class ConvGRU(nn.Module):
-    """Convolutional GRU cell with 3x3 gates.
-
-    The update and reset gates read the same ``[x, s]``, so they run as one convolution with
-    ``2C`` output channels (their weights concatenated along the output channels), which computes
-    each output channel exactly as the two separate convolutions do. Without autograd the
-    concatenated input is built once: after the gates, its state half is overwritten in place with
-    ``s * r`` for the candidate convolution.
-
-    Parameters
-    ----------
-    channels : int
-        Channels of the input and of the hidden state (C).
-    """
-
-    def __init__(self, channels: int) -> None:
-        super().__init__()
-        self.update = nn.Conv2d(2 * channels, channels, 3, padding=1)
-        self.reset = nn.Conv2d(2 * channels, channels, 3, padding=1)
-        self.candidate = nn.Conv2d(2 * channels, channels, 3, padding=1)
-
-    def gate_weights(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """The update and reset gates as one convolution: weight (2C, 2C, 3, 3), bias (2C,)."""
-        return (torch.cat([self.update.weight, self.reset.weight]), torch.cat([self.update.bias, self.reset.bias]))
-
-    def forward(self, x: torch.Tensor, state: torch.Tensor,
-                gates: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
-        """x, state: (B, C, H, W) -> new state (B, C, H, W), of the state's dtype.
-
-        ``gates`` may pass :meth:`gate_weights` computed once in advance.
-        """
-        c = x.shape[1]
-        weight, bias = self.gate_weights() if gates is None else gates
-        xs = torch.cat([x, state.to(x.dtype)], dim=1)
-        zr = torch.sigmoid(F.conv2d(xs, weight.to(xs.dtype), bias.to(xs.dtype), padding=1))
-        z, r = zr[:, :c], zr[:, c:]
-        if torch.is_grad_enabled() and (xs.requires_grad or r.requires_grad):
-            xs = torch.cat([x, state.to(x.dtype) * r], dim=1)  # autograd still needs the old xs
-        else:
-            torch.mul(xs[:, c:], r, out=xs[:, c:])  # [x, s * r] in place
-        o = torch.tanh(self.candidate(xs))
-        return torch.addcmul(state, o.to(state.dtype) - state, z.to(state.dtype))
-
-
-class ResidualBlock(nn.Module):
-    """3x3 conv, ReLU, 3x3 conv, + input, ReLU; channels unchanged."""
-
-    def __init__(self, channels: int) -> None:
-        super().__init__()
-        self.conv_a = nn.Conv2d(channels, channels, 3, padding=1)
-        self.conv_b = nn.Conv2d(channels, channels, 3, padding=1)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """x: (B, C, H, W) -> (B, C, H, W)."""
-        y = self.conv_b(F.relu_(self.conv_a(x)))
-        return F.relu_(y.add_(x))
 
 
 class FireNetModule(nn.Module):
@@ -290,57 +222,10 @@ def load_firenet(path: str | os.PathLike) -> tuple[FireNetModule, str]:
     FormatError
         When the file is not a FireNet checkpoint, a tensor is unused or missing, or a shape differs.
     """
-    try:
-        checkpoint = torch.load(Path(path), map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise
-    except Exception as exc:
-        raise FormatError(f"{path}: cannot be read as a weights-only torch file ({type(exc).__name__}: {exc})") from exc
-    state_dict = checkpoint.get("state_dict", checkpoint) if isinstance(checkpoint, dict) else None
-    if not isinstance(state_dict, dict) or not all(isinstance(v, torch.Tensor) for v in state_dict.values()):
-        raise FormatError(f"{path}: expected a dictionary of tensors (optionally under 'state_dict')")
-    mapped, layout = map_state_dict(state_dict)
+    mapped, layout = map_state_dict(load_torch_state(path))
     module = FireNetModule()
-    own = module.state_dict()
-    missing = sorted(set(own) - set(mapped))
-    unused = sorted(set(mapped) - set(own))
-    if missing or unused:
-        raise FormatError(f"{path} ({layout} layout): missing tensors {missing}, unused tensors {unused}")
-    wrong = [f"{k}: file {tuple(mapped[k].shape)}, network {tuple(own[k].shape)}"
-             for k in own if mapped[k].shape != own[k].shape]
-    if wrong:
-        raise FormatError(f"{path} ({layout} layout): shapes differ: {wrong}")
-    module.load_state_dict({k: v.to(torch.float32) for k, v in mapped.items()}, strict=True)
+    load_state_strict(module, mapped, f"{path} ({layout} layout)")
     return module.eval(), layout
-
-
-def find_weights(file_name: str, weights_dir: str | os.PathLike | None) -> Path:
-    """Locate a weights file: ``weights_dir`` or ``$NEUSPIKE_WEIGHTS``, then ``firenet/`` or the folder itself.
-
-    Raises
-    ------
-    MethodUnavailable
-        When no folder is given or the file is in neither place; the message says which.
-    """
-    if weights_dir is None:
-        weights_dir = os.environ.get(WEIGHTS_ENV) or None
-        origin = f"${WEIGHTS_ENV}"
-    else:
-        origin = "weights_dir"
-    if weights_dir is None:
-        raise MethodUnavailable(
-            f"FireNet weights not given: pass weights_dir (CLI --weights) or set ${WEIGHTS_ENV} "
-            f"to the folder holding {file_name}"
-        )
-    root = Path(weights_dir)
-    candidates = [root / "firenet" / file_name, root / file_name]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    raise MethodUnavailable(
-        f"FireNet weights {file_name} not found: looked in {', '.join(str(c) for c in candidates)} "
-        f"({origin} = {str(root)!r})"
-    )
 
 
 def event_windows(t_s: np.ndarray, *, events_per_window: int, end_s: float,
@@ -380,84 +265,57 @@ def event_windows(t_s: np.ndarray, *, events_per_window: int, end_s: float,
     return windows[::-1]
 
 
-def native_bfloat16() -> bool:
-    """Whether this CPU computes bfloat16 natively (AVX512-BF16 or AMX), as torch reports it."""
-    cpu = getattr(torch, "cpu", None)
-    for probe in ("_is_avx512_bf16_supported", "_is_amx_tile_supported"):
-        check = getattr(cpu, probe, None)
-        try:
-            if check is not None and check():
-                return True
-        except Exception:  # a private probe that changed shape: assume no native support
-            continue
-    return False
-
-
-class FireNet(Method):
+class FireNet(LearnedMethod):
     """``firenet`` / ``firenet-plus``: FireNet on 5-bin voxel grids, warmed up on the sample's history.
 
     Parameters
     ----------
-    weights_file : str
-        File name of the checkpoint (``"firenet.pt"`` or ``"firenet_plus.pt"``).
     normalize : bool
         Normalise the non-zero voxels to mean 0, std 1 (as ``firenet.pt`` was trained; not
         ``firenet_plus.pt``).
-    weights_dir : str or path or None
-        Folder of the weights; ``None`` reads ``$NEUSPIKE_WEIGHTS``.
     events_per_pixel : float
         Events per window per pixel (default 0.35).
     max_windows : int
         Most recent windows used for warm-up and output (default 24).
-    precision : ``"auto"`` (default), ``"bfloat16"`` or ``"float32"``
-        Arithmetic of the convolutions (see the module docstring).
+    weights_file, weights_dir, device, precision
+        As for every :class:`~neuspike.learned.LearnedMethod`; ``weights_file`` is
+        ``"firenet.pt"`` or ``"firenet_plus.pt"`` (published, ``.pt``).
 
     Raises
     ------
-    MethodUnavailable
+    neuspike.weights.WeightsNotFound
         When the weights cannot be found.
     """
 
     inputs = frozenset({"events"})
     recurrent = True
+    weights_subdirs = ("firenet",)
 
-    def __init__(
-        self,
-        name: str | None = None,
-        *,
-        weights_file: str,
-        normalize: bool,
-        weights_dir: str | os.PathLike | None = None,
-        events_per_pixel: float = 0.35,
-        max_windows: int = 24,
-        precision: str = "auto",
-    ) -> None:
-        if precision not in ("auto", "float32", "bfloat16"):
-            raise InputError(f"precision: expected 'auto', 'float32' or 'bfloat16', got {precision!r}")
-        if precision == "auto":
-            precision = "bfloat16" if native_bfloat16() else "float32"
+    def __init__(self, name: str | None = None, *, normalize: bool, events_per_pixel: float = 0.35,
+                 max_windows: int = 24, **learned: Any) -> None:
         if not isinstance(normalize, bool):
             raise InputError(f"normalize: expected True or False, got {normalize!r}")
+        self.layout: str | None = None
         super().__init__(
             name,
-            weights_file=str(weights_file),
             normalize=normalize,
             events_per_pixel=check_positive("events_per_pixel", events_per_pixel),
             max_windows=check_positive_int("max_windows", max_windows),
-            precision=precision,
+            **learned,
         )
-        self.weights_path = find_weights(str(weights_file), weights_dir)
-        module, self.layout = load_firenet(self.weights_path)
-        self.module = module.to(memory_format=torch.channels_last)
-        self._states: tuple[torch.Tensor, torch.Tensor] | None = None
-        self.windows_used = 0
+        self.module = self.module.to(memory_format=torch.channels_last)
 
-    def reset(self) -> None:
-        """Forget the recurrent states (start of a new sequence)."""
-        self._states = None
+    def build_module(self) -> nn.Module:
+        return FireNetModule()
 
-    def parameter_count(self) -> int:
-        return sum(p.numel() for p in self.module.parameters())
+    def load_weights(self, module: nn.Module, path: Path) -> None:
+        mapped, self.layout = map_state_dict(load_torch_state(path))
+        load_state_strict(module, mapped, f"{path} ({self.layout} layout)")
+
+    @property
+    def windows_used(self) -> int | None:
+        """The event windows the last call stepped through (``last_steps``)."""
+        return self.last_steps
 
     def step(self, grid: np.ndarray) -> np.ndarray:
         """Advance the network by one voxel grid and return its output.
@@ -474,23 +332,21 @@ class FireNet(Method):
         grid = np.asarray(grid, dtype=np.float32)
         if grid.ndim != 3 or grid.shape[0] != NUM_BINS:
             raise InputError(f"FireNet.step: expected a voxel grid of shape ({NUM_BINS}, H, W), got {grid.shape}")
-        x = torch.from_numpy(np.ascontiguousarray(grid))[None].contiguous(memory_format=torch.channels_last)
-        if self._states is not None and tuple(self._states[0].shape[2:]) != tuple(grid.shape[1:]):
+        if self._state is not None and tuple(self._state[0].shape[2:]) != tuple(grid.shape[1:]):
             raise InputError(
-                f"FireNet.step: grid size {grid.shape[1:]} differs from the sequence's {tuple(self._states[0].shape[2:])}; "
+                f"FireNet.step: grid size {grid.shape[1:]} differs from the sequence's {tuple(self._state[0].shape[2:])}; "
                 "call reset() between sequences"
             )
-        with torch.inference_mode():
-            if self.params["precision"] == "bfloat16":
-                with torch.autocast("cpu", dtype=torch.bfloat16):
-                    out, self._states = self.module(x, self._states)
-            else:
-                out, self._states = self.module(x, self._states)
-            image = out[0, 0].float().clamp_(0.0, 1.0)
-        return np.ascontiguousarray(image.numpy(), dtype=np.float32)
+        out = self.run_step(self._grid_tensor(grid))
+        image = out[0, 0].float().clamp(0.0, 1.0)
+        return np.ascontiguousarray(image.cpu().numpy(), dtype=np.float32)
 
-    def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
-        self.reset()
+    @staticmethod
+    def _grid_tensor(grid: np.ndarray) -> tuple[torch.Tensor]:
+        return (torch.from_numpy(np.ascontiguousarray(grid))[None].contiguous(memory_format=torch.channels_last),)
+
+    def encode(self, sample: Sample) -> list[tuple[torch.Tensor]]:
+        """One voxel grid per fixed-count event window up to the key instant (an empty grid without events)."""
         h, w = sample.height, sample.width
         events = sample.events
         start = min(float(events.t_s[0]), sample.key_time_s) if len(events) else sample.key_time_s
@@ -499,22 +355,20 @@ class FireNet(Method):
         windows = event_windows(events.t_s, events_per_window=per_window, end_s=sample.key_time_s,
                                 max_windows=self.params["max_windows"])
         if not windows:
-            image = self.step(np.zeros((NUM_BINS, h, w), dtype=np.float32))
-            self.windows_used = 1
-            return image, CLAMP
+            return [self._grid_tensor(np.zeros((NUM_BINS, h, w), dtype=np.float32))]
+        steps = []
         for i0, i1, t0, t1 in windows:
             # slices of a validated stream keep its invariants
             chunk = EventStream.trusted(events.t_s[i0:i1], events.x[i0:i1], events.y[i0:i1], events.p[i0:i1], w, h)
             grid = voxel_grid(chunk, bins=NUM_BINS, t0_s=t0, t1_s=t1, height=h, width=w,
                               normalize=self.params["normalize"])
-            image = self.step(grid)
-        self.windows_used = len(windows)
-        return image, CLAMP
+            steps.append(self._grid_tensor(grid))
+        return steps
 
 
 def register_methods(register) -> None:
     """Add ``firenet`` and ``firenet-plus`` to the registry."""
-    register("firenet", FireNet, params={"weights_file": "firenet.pt", "normalize": True},
+    register("firenet", FireNet, params={"normalize": True}, weights="firenet.pt",
              description="FireNet (published weights), normalised 5-bin voxel grids, 0.35 events/pixel windows")
-    register("firenet-plus", FireNet, params={"weights_file": "firenet_plus.pt", "normalize": False},
+    register("firenet-plus", FireNet, params={"normalize": False}, weights="firenet_plus.pt",
              description="FireNet+ (published weights), raw 5-bin voxel grids, 0.35 events/pixel windows")

@@ -117,7 +117,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from baselines.normalisation import rate_to_image
+from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method

@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from baselines.normalisation import rate_to_image
-from baselines.tfp import check_spike_window
+from neuspike.checks import check_spike_window
+from neuspike.normalisation import rate_to_image
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample

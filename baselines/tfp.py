@@ -4,7 +4,7 @@ The estimate of a pixel's rate (spikes per plane) is its spike count in a window
 the number of planes in that window; the radiance is rate / gain, where the gain is the expected
 number of spikes per plane per unit radiance (``L / threshold`` for simulated data). When the gain is
 unknown (real recordings) the rate goes through the robust normalisation of
-:mod:`baselines.normalisation` instead, and the method says so in its normalisation label.
+:mod:`neuspike.normalisation` instead, and the method says so in its normalisation label.
 
 Which planes
 ------------
@@ -32,45 +32,15 @@ from typing import Any
 
 import numpy as np
 
-from baselines.normalisation import rate_to_image
+from neuspike.checks import check_spike_window
 from neuspike.errors import InputError
+from neuspike.normalisation import rate_to_image
+from neuspike.representations import spike_count
 from neuspike.methods import Method
 from neuspike.sample import Sample
 
 #: The fixed-size variants registered besides ``tfp`` (planes per window).
 VARIANT_WINDOWS_PLANES = (8, 16, 32, 64)
-
-# A uint8 accumulator holds the count of up to 255 planes.
-_UINT8_PLANES = 255
-
-
-def check_spike_window(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
-    """Validate a spike window and a key plane; return them as ``(bool array, int)``.
-
-    Parameters
-    ----------
-    planes : ndarray of bool, shape (T, H, W), T >= 1
-    key_plane : int in [0, T)
-
-    Raises
-    ------
-    InputError
-        On a wrong type, dtype, shape or an out-of-range key plane.
-    """
-    if not isinstance(planes, np.ndarray):
-        raise InputError(f"planes: expected a numpy array of bool (T, H, W), got {type(planes).__name__}")
-    if planes.ndim != 3:
-        raise InputError(f"planes: expected shape (T, H, W), got {planes.shape}")
-    if planes.dtype != np.bool_:
-        raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
-    if planes.shape[0] < 1:
-        raise InputError(f"planes: expected at least one plane, got shape {planes.shape}")
-    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
-        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
-    if not 0 <= key_plane < planes.shape[0]:
-        raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
-    return planes, int(key_plane)
-
 
 def _check_window(window: Any) -> int | None:
     if window is None:
@@ -110,33 +80,6 @@ def tfp_window(num_planes: int, key_plane: int, window: int | None) -> tuple[int
         return 0, num_planes
     start = min(max(key_plane - window // 2, 0), num_planes - window)
     return start, start + window
-
-
-def spike_count(planes: np.ndarray) -> np.ndarray:
-    """Spikes per pixel over all planes of ``planes``.
-
-    Parameters
-    ----------
-    planes : ndarray of bool, shape (T, H, W)
-
-    Returns
-    -------
-    ndarray of unsigned integers, shape (H, W): uint8 when T <= 255, else uint32.
-    """
-    n = planes.shape[0]
-    u8 = planes.view(np.uint8)  # bool and uint8 share their layout: 0 or 1 per byte
-    if n <= _UINT8_PLANES:
-        hw = planes.shape[1] * planes.shape[2]
-        if hw % 8 == 0 and planes.flags.c_contiguous:
-            # Eight pixels per 64-bit word: each byte lane sums at most 255 ones, so no carry
-            # crosses into the next pixel, and viewing the word sums as bytes gives the counts.
-            words = u8.reshape(n, hw // 8 * 8).view(np.uint64)
-            return np.add.reduce(words, axis=0).view(np.uint8).reshape(planes.shape[1:])
-        return np.add.reduce(u8, axis=0, dtype=np.uint8)
-    count = np.zeros(planes.shape[1:], dtype=np.uint32)
-    for s in range(0, n, _UINT8_PLANES):
-        count += np.add.reduce(u8[s : s + _UINT8_PLANES], axis=0, dtype=np.uint8)
-    return count
 
 
 def tfp_rate(planes: np.ndarray, key_plane: int, window: int | None) -> np.ndarray:

@@ -63,9 +63,8 @@ from typing import Any
 
 import numpy as np
 
-from baselines.normalisation import rate_to_image
-from baselines.tfp import check_spike_window
-from neuspike.checks import check_positive
+from neuspike.normalisation import rate_to_image
+from neuspike.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
 from neuspike.sample import Sample

@@ -9,9 +9,9 @@ weights not given) becomes rows with ``status="skipped"`` and the reason; a skip
 In each cell
 ------------
 1. The recording is simulated once, with only the modalities the sweep's methods consume, plus
-   ``history_s`` seconds of event history when a recurrent method needs warm-up, and cached on disk
-   (:mod:`bench.cache`). Its random draws come from
-   ``derive_rng(seed, "cell", scene_spec, condition)``: same seed, same bytes.
+   ``history_s`` seconds of event history when a recurrent method needs warm-up, and cached on disk,
+   by :func:`neuspike.simulate.simulate_recording` (the one way from a cell to a recording, shared
+   with the timing benchmark and the training datasets): same seed, same bytes.
 2. Every method reconstructs from that same recording, given without its ground truth. Before the
    timed call, a method's first use in a process is one untimed call on the same sample, so one-off
    costs (lazy imports, thread pools, first-call allocation) stay out of the timing. ``reset()``
@@ -20,8 +20,9 @@ In each cell
    truth clipped to [0, 1].
 
 Worker set-up (:class:`WorkerSetup`, applied once per process and idempotent): plug-in modules are
-imported (:func:`load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable),
-``NEUSPIKE_WEIGHTS`` is set from the sweep's weights folder, and torch's intra-op thread count is set.
+imported (:func:`load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable)
+and torch's intra-op thread count is set. The weights folder and device travel in the set-up and are
+passed to :func:`neuspike.methods.create`; nothing is exported through the environment.
 """
 
 from __future__ import annotations
@@ -40,16 +41,16 @@ from typing import Any
 
 import numpy as np
 
-from bench.cache import RecordingCache, recording_key
 from bench.grid import Cell
 from bench.results import ERROR, OK, SKIPPED, base_row
+from neuspike import methods as registry
+from neuspike.cache import RecordingCache
 from neuspike.errors import InputError
-from neuspike.metrics import FULL_REFERENCE_METRICS
+from neuspike.metrics import FULL_REFERENCE_METRICS, evaluate
+from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording
 
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
-#: Environment variable the learned methods read their weights folder from.
-WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
 #: The metrics of every row, in the order rows are produced.
 METRICS: tuple[str, ...] = tuple(FULL_REFERENCE_METRICS)
 DATA_RANGE = 1.0
@@ -65,14 +66,17 @@ class WorkerSetup:
         Modules (dotted names or paths to ``.py`` files) to import; each registers its methods
         with :func:`neuspike.methods.register` when imported.
     weights : str or None
-        Folder of learned weights; exported as ``NEUSPIKE_WEIGHTS``.
+        Folder of published weights the user named (passed to :func:`neuspike.methods.create`).
     threads : int or None
         torch intra-op threads per worker (``None`` leaves torch's default).
+    device : str
+        Torch device of learned methods.
     """
 
     plugins: tuple[str, ...] = ()
     weights: str | None = None
     threads: int | None = None
+    device: str = "cpu"
 
 
 @dataclass(frozen=True)
@@ -81,7 +85,7 @@ class CellTask:
 
     cell_id: str
     cell: Cell
-    sensor: Any  # neuspike.simulate.SensorConfig
+    sensor: SensorConfig
     methods: tuple[str, ...]
     modalities: tuple[str, ...]
     history_s: float = 0.0
@@ -120,8 +124,8 @@ class CellResult:
 # ----------------------------------------------------------------------------------------------
 
 _LOADED_PLUGINS: dict[str, Any] = {}
-#: (name, weights folder) -> [registry entry, instance, warmed-up flag], per process.
-_INSTANCES: dict[tuple[str, str | None], list[Any]] = {}
+#: (name, weights folder, device) -> [registry entry, instance, warmed-up flag], per process.
+_INSTANCES: dict[tuple[str, str | None, str], list[Any]] = {}
 
 
 def plugin_names(extra: tuple[str, ...] = ()) -> tuple[str, ...]:
@@ -167,7 +171,7 @@ def load_plugins(plugins: tuple[str, ...]) -> list[str]:
                 module = importlib.import_module(plugin)
             hook = getattr(module, "register_methods", None)
             if callable(hook):
-                hook()
+                hook(registry.register)
         except InputError:
             raise
         except Exception as exc:
@@ -186,8 +190,6 @@ def forget_plugin(plugin: str) -> None:
 
 def prepare_worker(setup: WorkerSetup) -> int | None:
     """Apply ``setup`` in this process (idempotent); return torch's thread count (None without torch)."""
-    if setup.weights is not None:
-        os.environ[WEIGHTS_ENV] = str(setup.weights)
     load_plugins(plugin_names(setup.plugins))
     try:
         import torch
@@ -198,15 +200,13 @@ def prepare_worker(setup: WorkerSetup) -> int | None:
     return int(torch.get_num_threads())
 
 
-def _method(name: str) -> list[Any]:
+def _method(name: str, setup: WorkerSetup) -> list[Any]:
     """``[entry, instance, warmed]`` of ``name`` in this process (re-created when the entry changed)."""
-    from neuspike import methods
-
-    entry = methods.entry(name)
-    key = (name, os.environ.get(WEIGHTS_ENV))
+    entry = registry.entry(name)
+    key = (name, setup.weights, setup.device)
     cached = _INSTANCES.get(key)
     if cached is None or cached[0] is not entry:
-        cached = [entry, methods.create(name), False]
+        cached = [entry, registry.create(name, weights_dir=setup.weights, device=setup.device), False]
         _INSTANCES[key] = cached
     return cached
 
@@ -223,27 +223,15 @@ def one_line(exc: BaseException) -> str:
 
 def cell_rng(cell: Cell) -> np.random.Generator:
     """The generator of every random draw of the cell's simulation."""
-    from neuspike.rng import derive_rng
-
-    return derive_rng(cell.seed, "cell", cell.scene.spec.as_dict(), cell.condition.as_dict())
+    return sample_rng(cell.seed, cell.scene.spec, cell.condition)
 
 
-def simulate_cell(task: CellTask) -> tuple[Any, bool]:
+def simulate_cell(task: CellTask) -> tuple[Recording, bool]:
     """The cell's recording, from the cache or simulated (then cached). Returns ``(recording, hit)``."""
-    from neuspike.scenes import make_scene
-    from neuspike.simulate import simulate_window
-
     cell = task.cell
-    key = recording_key(scene_spec=cell.scene.spec, condition=cell.condition, sensor=task.sensor,
-                        seed=cell.seed, modalities=task.modalities, history_s=task.history_s)
-
-    def simulate():
-        return simulate_window(
-            make_scene(cell.scene.spec), cell.condition, rng=cell_rng(cell), sensor=task.sensor,
-            modalities=set(task.modalities), history_s=task.history_s, seed=cell.seed,
-        )
-
-    return RecordingCache(task.cache_dir).get_or_simulate(key, simulate)
+    return simulate_recording(cell.scene.spec, cell.condition, sensor=task.sensor, seed=cell.seed,
+                              modalities=task.modalities, history_s=task.history_s,
+                              cache=RecordingCache(task.cache_dir) if task.cache_dir is not None else None)
 
 
 def _stage_summary(meta: dict[str, Any]) -> tuple[list[tuple[str, str]], float, str]:
@@ -280,9 +268,6 @@ def run_cell(task: CellTask) -> CellResult:
     CellResult
         ``len(task.methods) * len(METRICS)`` rows, in method order then :data:`METRICS` order.
     """
-    from neuspike import methods as registry
-    from neuspike.metrics import evaluate
-
     t_start = time.perf_counter()
     cell = task.cell
     width, height = cell.scene.spec.size
@@ -311,7 +296,7 @@ def run_cell(task: CellTask) -> CellResult:
         try:
             entry = registry.entry(name)
             info[name]["inputs"] = "+".join(sorted(entry.inputs))
-            slot = _method(name)
+            slot = _method(name, task.setup)
             method = slot[1]
             info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()))
             resolved[name] = slot

@@ -31,7 +31,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.table import Table  # noqa: E402
 
-from bench.cache import write_bytes_atomic  # noqa: E402
+from neuspike.atomic import write_with  # noqa: E402
 from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values,  # noqa: E402
                           method_families, method_order)
 
@@ -84,7 +84,7 @@ def save_png(fig: Figure, path: str | Path, dpi: int = 130) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
     data = buf.getvalue()
-    return write_bytes_atomic(path, lambda f: f.write(data))
+    return write_with(path, lambda f: f.write(data))
 
 
 def _axis_positions(axis: str, values: Sequence[Any]) -> np.ndarray:

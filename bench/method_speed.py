@@ -83,11 +83,12 @@ def _spread(row: dict[str, Any], prefix: str) -> str:
     return f"{tb.fmt(med, 'ms')} [{tb.fmt(row[f'{prefix}_min'], 'ms')}-{tb.fmt(row[f'{prefix}_max'], 'ms')}]"
 
 
-def measure(names: Sequence[str], *, repeats: int, warmup: int, log=None) -> pd.DataFrame:
+def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None, device: str = "cpu",
+            log=None) -> pd.DataFrame:
     """One row per method: ms on the 256-plane and (spike methods) 41-plane windows, per step, verdict."""
     import torch
 
-    created = timing.create_methods(names)
+    created = timing.create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for method, _ in created.values() if method is not None for m in method.inputs}
     sample = timing.representative_sample(WIDTH, HEIGHT, modalities=sorted(needs)) if needs else None
     short = timing.cut_spike_window(sample, REFERENCE_PLANES) if sample is not None and sample.spikes is not None else None
@@ -162,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--repeats", type=int, default=7, help="timed calls per method (default 7)")
     parser.add_argument("--warmup", type=int, default=1, help="untimed calls first (default 1)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
-    parser.add_argument("--weights", help="folder of learned weights (sets NEUSPIKE_WEIGHTS)")
+    parser.add_argument("--weights", help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
     parser.add_argument("--out", help="also write method_speed.csv and method_speed.md into this folder")
     return parser
 
@@ -170,19 +171,19 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     import torch
 
-    from bench.cache import write_text_atomic
+    from neuspike.atomic import write_text
+    from neuspike.weights import weights_dir_from_env
     from bench.provenance import machine
 
     args = build_parser().parse_args(argv)
     try:
-        if args.weights is not None:
-            if not Path(args.weights).is_dir():
-                raise InputError(f"--weights: {args.weights!r} is not a folder")
-            os.environ[timing.WEIGHTS_ENV] = str(Path(args.weights).resolve())
+        weights = weights_dir_from_env(args.weights)
+        if weights is not None and not weights.is_dir():
+            raise InputError(f"weights folder {str(weights)!r} is not a folder")
         if args.threads is not None:
             torch.set_num_threads(timing.check_count("--threads", args.threads, 1))
         names = timing.method_names(args.methods)
-        frame = measure(names, repeats=args.repeats, warmup=args.warmup,
+        frame = measure(names, repeats=args.repeats, warmup=args.warmup, weights_dir=weights,
                         log=lambda s: print(s, file=sys.stderr, flush=True))
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -191,8 +192,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(text)
     if args.out:
         out = Path(args.out)
-        write_text_atomic(out / "method_speed.csv", tb.to_csv_text(frame))
-        write_text_atomic(out / "method_speed.md", text)
+        write_text(out / "method_speed.csv", tb.to_csv_text(frame))
+        write_text(out / "method_speed.md", text)
     return 0
 
 

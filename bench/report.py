@@ -53,7 +53,7 @@ import pandas as pd
 
 from bench import figures as figs
 from bench import tables as tb
-from bench.cache import write_bytes_atomic, write_text_atomic
+from neuspike.atomic import write_text, write_with
 from bench.claims import claims_markdown, evaluate_claims
 from neuspike.atomic import replacing
 from neuspike.errors import InputError
@@ -107,7 +107,7 @@ def write_image_png(path: str | os.PathLike, image01: np.ndarray) -> Path:
     buf = io.BytesIO()
     Image.fromarray(u8).save(buf, format="PNG")
     data = buf.getvalue()
-    return write_bytes_atomic(path, lambda f: f.write(data))
+    return write_with(path, lambda f: f.write(data))
 
 
 def _read_gray(path: Path) -> np.ndarray:
@@ -302,8 +302,8 @@ def title_blocks(inputs: ReportInputs) -> list[tuple[str, str]]:
 # ----------------------------------------------------------------------------------------------
 
 def _write_table(tables_dir: Path, name: str, markdown: str, frame: pd.DataFrame, written: list[Path]) -> None:
-    written.append(write_text_atomic(tables_dir / f"{name}.md", markdown))
-    written.append(write_text_atomic(tables_dir / f"{name}.csv", tb.to_csv_text(frame)))
+    written.append(write_text(tables_dir / f"{name}.md", markdown))
+    written.append(write_text(tables_dir / f"{name}.csv", tb.to_csv_text(frame)))
 
 
 def write_timing_tables(tables_dir: Path, timing: pd.DataFrame, metadata: dict[str, Any]) -> list[Path]:

@@ -41,7 +41,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from bench.cache import write_text_atomic
+from neuspike.atomic import write_text
 
 COLUMNS: tuple[str, ...] = (
     "cell", "scene", "kind", "image", "width", "height", "planes",
@@ -107,7 +107,7 @@ def read_csv(path: str | os.PathLike) -> pd.DataFrame:
 
 def write_part(parts_dir: str | os.PathLike, cell_id: str, rows: Sequence[Mapping[str, Any]]) -> Path:
     """Write one cell's rows to ``<parts_dir>/<cell_id>.csv`` atomically."""
-    return write_text_atomic(Path(parts_dir) / f"{cell_id}.csv", to_csv_text(rows_frame(rows)))
+    return write_text(Path(parts_dir) / f"{cell_id}.csv", to_csv_text(rows_frame(rows)))
 
 
 def part_path(parts_dir: str | os.PathLike, cell_id: str) -> Path:
@@ -124,7 +124,7 @@ def assemble(parts_dir: str | os.PathLike, cell_ids: Iterable[str], out_path: st
     frames = [read_csv(p) for p in (part_path(parts_dir, c) for c in cell_ids) if p.exists()]
     frame = pd.concat(frames, ignore_index=True) if frames else rows_frame([])
     frame = sort_rows(frame)
-    write_text_atomic(out_path, to_csv_text(frame))
+    write_text(out_path, to_csv_text(frame))
     return frame
 
 

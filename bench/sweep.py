@@ -13,7 +13,7 @@ into its output folder:
 ``images/``         reconstructions and ground truth for the report's figure grid, in the layout
                     of :mod:`bench.report` (``images/<scene>/<axis>=<value>/<method>.png``): for the
                     swept axis, of the first seed with the other axes at their first value
-``cache/``          simulated recordings (:mod:`bench.cache`), unless ``--cache`` points elsewhere
+``cache/``          simulated recordings (:mod:`neuspike.cache`), unless ``--cache`` points elsewhere
 
 Resuming
     Finished cells are never recomputed: a rerun of the same command after a crash, an interrupt or
@@ -48,20 +48,22 @@ from typing import Any, Sequence
 import pandas as pd
 
 from bench import grid as grids
-from bench.cache import canonical_json, stable_hash, write_json_atomic, write_text_atomic
-from bench.cells import (WEIGHTS_ENV, CellTask, WorkerSetup, load_plugins, one_line, plugin_names,
+from bench.cells import (CellTask, WorkerSetup, load_plugins, one_line, plugin_names,
                          prepare_worker, run_cell)
 from bench.executors import EXECUTORS, DaskExecutor, make_executor
 from bench.grid import Grid
 from bench.provenance import collect, finish, now_iso
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
+from neuspike.atomic import write_json, write_text
 from neuspike.conditions import parse_effects
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.jsonio import canonical_json, stable_hash
+from neuspike.simulate import DEFAULT_HISTORY_WINDOWS
+from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
 HARNESS_VERSION = "1"
 #: Default event history for recurrent methods, in windows of the spike window's duration.
-DEFAULT_HISTORY_WINDOWS = 5.0
 
 
 class ConfigMismatch(InputError):
@@ -85,7 +87,7 @@ class SweepSpec:
         Event history before the window, in window durations, simulated only when a requested
         method is recurrent (it warms up on it).
     weights : str or None
-        Folder of learned weights (``NEUSPIKE_WEIGHTS``).
+        Folder of published weights (the command line's ``--weights`` or ``$NEUSPIKE_WEIGHTS``).
     axis : str or None
         The swept axis (``"light"``, ``"motion"``, ``"noise"``) whose reconstructions are saved
         as images for the report's figure grid; ``None`` saves none.
@@ -417,7 +419,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         **executor.describe(), "threads_per_worker": threads, "cache_dir": cache_dir,
         "plugins": list(plugins), "allow_failures": execution.allow_failures,
     }
-    write_json_atomic(out / "config.json", {"sweep": sweep_config, "execution": execution_config})
+    write_json(out / "config.json", {"sweep": sweep_config, "execution": execution_config})
 
     done: dict[str, str] = {}
     for cid in ids:
@@ -443,7 +445,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
                   contended=None if remote else executor.workers > 1)
     run["sweep"] = spec.name
     run["previous_runs"] = history
-    write_json_atomic(out / "metadata.json", run)
+    write_json(out / "metadata.json", run)
 
     n_failed_now = n_hits = n_computed = 0
     crashed: dict[str, str] = {}
@@ -472,7 +474,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
                     write_part(parts_dir, task.cell_id, result.rows)
                     if result.failures:
                         text = "\n".join(f"== {k} ==\n{v}" for k, v in result.failures.items())
-                        write_text_atomic(errors_dir / f"{task.cell_id}.txt", text)
+                        write_text(errors_dir / f"{task.cell_id}.txt", text)
                     else:  # a retried cell that now succeeds
                         (errors_dir / f"{task.cell_id}.txt").unlink(missing_ok=True)
                     done[task.cell_id] = result.status
@@ -502,7 +504,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
                  cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,
                  threads_observed=sorted(observed_threads), time_split=split,
                  wall_seconds=outcome.seconds)
-    write_json_atomic(out / "metadata.json", run)
+    write_json(out / "metadata.json", run)
     if execution.report and not frame.empty:
         outcome.report_path, outcome.report_note, outcome.report_failed = build_report_if_available(out)
     return outcome
@@ -562,7 +564,8 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                    help="event history before each window for recurrent methods to warm up on, in window "
                    f"durations (default: {DEFAULT_HISTORY_WINDOWS:g}; simulated only when a recurrent "
                    "method is requested)")
-    g.add_argument("--weights", help="folder of learned weights (sets NEUSPIKE_WEIGHTS in every worker)")
+    g.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
+                        "the suite's own trained weights ship with it and need no flag")
     g.add_argument("--plugin", action="append", default=[], metavar="MODULE",
                    help="import MODULE in every worker to register extra methods (repeatable)")
     r = parser.add_argument_group("how to run")
@@ -606,10 +609,10 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
     """Build the :class:`SweepSpec` of a command line."""
     from neuspike.simulate import SensorConfig
 
-    if args.weights is not None:
-        if not Path(args.weights).is_dir():
-            raise InputError(f"--weights: {args.weights!r} is not a folder")
-        os.environ[WEIGHTS_ENV] = str(Path(args.weights).resolve())
+    weights = weights_dir_from_env(args.weights)
+    if weights is not None and not weights.is_dir():
+        origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
+        raise InputError(f"{origin}: {str(weights)!r} is not a folder")
     if args.effects is None:
         effects = None
     elif args.effects.strip().lower() == "none":
@@ -627,7 +630,7 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
     )
     return SweepSpec(
         name=name, grid=grid, methods=_methods_from(args), sensor=SensorConfig(planes=args.planes),
-        history_windows=args.history_windows, weights=os.environ.get(WEIGHTS_ENV) or None, axis=axis,
+        history_windows=args.history_windows, weights=str(weights) if weights is not None else None, axis=axis,
     )
 
 

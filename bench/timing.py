@@ -10,7 +10,7 @@ of the timed calls, torch's thread count, and the method's learned parameter cou
 
 Recurrent methods (FireNet) warm up on the event history inside every call; their ms per frame is
 the cost of one network step, the call's time divided by the event windows it processed
-(``windows_used``), as in the paper's Table 2 (one inference per voxel grid). The whole call is
+(``last_steps``), as in the paper's Table 2 (one inference per voxel grid). The whole call is
 kept in ``median_ms``.
 
 A method that cannot run (e.g. FireNet without weights: ``MethodUnavailable``) or fails is a row
@@ -46,8 +46,13 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
+from bench import grid as grids
 from bench import tables as tb
+from neuspike.conditions import Condition
 from neuspike.errors import InputError
+from neuspike.sample import Sample
+from neuspike.simulate import DEFAULT_HISTORY_WINDOWS, SensorConfig, simulate_sample
+from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Default resolutions (width, height): the paper's Table 2.
 RESOLUTIONS: tuple[tuple[int, int], ...] = tb.TABLE2_RESOLUTIONS
@@ -56,10 +61,8 @@ QUICK = {"repeats": 3, "warmup": 1}
 FULL = {"repeats": 10, "warmup": 2}
 #: The representative condition.
 LIGHT, MOTION, PLANES = 0.25, 128, 256
-DEFAULT_HISTORY_WINDOWS = 1.0
 #: Result folders searched (newest first) for the accuracy-versus-time chart.
 DEFAULT_RESULTS = ("runs/light", "runs/light-full", "runs/motion", "runs/motion-full", "runs/noise", "runs/noise-full")
-WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
 
 TIMING_COLUMNS = ("method", "family", "inputs", "resolution", "width", "height", "status", "error", "threads",
                   "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms", "q3_ms", "steps",
@@ -148,7 +151,7 @@ def time_callable(fn: Callable[[], Any], *, repeats: int, warmup: int, setup: Ca
 @dataclass(frozen=True)
 class MethodTiming:
     """A method's timing on a sample: the call statistics and the event windows (network steps) one
-    call processed (``None`` for methods that do not report ``windows_used``)."""
+    call processed (``None`` for methods that do not report ``last_steps``)."""
 
     stats: TimingStats
     steps: int | None
@@ -167,12 +170,12 @@ def time_method(method: Any, sample: Any, *, repeats: int, warmup: int,
                 timer: Callable[[], int] = time.perf_counter_ns) -> MethodTiming:
     """Time ``method.reconstruct(sample)`` with ``reset()`` before every call (outside the timing).
 
-    For recurrent methods that report ``windows_used`` (the event windows one call stepped through),
+    For recurrent methods that report ``last_steps`` (the event windows one call stepped through),
     :attr:`MethodTiming.steps` holds it, so that the cost of one step can be derived.
     """
     stats = time_callable(lambda: method.reconstruct(sample), repeats=repeats, warmup=warmup,
                           setup=method.reset, timer=timer)
-    steps = getattr(method, "windows_used", None) if getattr(method, "recurrent", False) else None
+    steps = method.last_steps if method.recurrent else None
     steps = int(steps) if isinstance(steps, (int, np.integer)) and steps > 0 else None
     return MethodTiming(stats, steps)
 
@@ -182,8 +185,11 @@ def time_method(method: Any, sample: Any, *, repeats: int, warmup: int,
 # ----------------------------------------------------------------------------------------------
 
 def representative_sample(width: int, height: int, *, history_windows: float = DEFAULT_HISTORY_WINDOWS,
-                          modalities: Iterable[str] = ("spikes", "events"), seed: int = 0) -> Any:
+                          modalities: Iterable[str] = ("spikes", "events"), seed: int = 0) -> Sample:
     """The sample every method is timed on at one resolution (module docstring), without ground truth.
+
+    Built by :func:`neuspike.simulate.simulate_sample`, the sweeps' own cell-to-sample path, so a
+    timed sample is the one a sweep cell of the same scene, condition and seed would see.
 
     Parameters
     ----------
@@ -193,22 +199,17 @@ def representative_sample(width: int, height: int, *, history_windows: float = D
         Event history before the window, in window durations (for recurrent methods).
     modalities : the inputs to simulate
     seed : int
-        Seed of the simulation's generator.
+        The cell's seed.
     """
-    from bench import grid as grids
-    from neuspike.conditions import Condition
-    from neuspike.scenes import make_scene
-    from neuspike.simulate import SensorConfig, simulate_window
-
     if not history_windows >= 0 or not math.isfinite(history_windows):
         raise InputError(f"history_windows: expected a finite number >= 0, got {history_windows!r}")
     entry = grids.scene_entry("pan:camera", (int(width), int(height)))
     sensor = SensorConfig(planes=PLANES)
     condition = Condition(light=LIGHT, motion=MOTION, effects=grids.DEFAULT_EFFECTS)
     window_s = sensor.planes / sensor.plane_rate_hz
-    recording = simulate_window(make_scene(entry.spec), condition, rng=np.random.default_rng(seed), sensor=sensor,
-                                modalities=set(modalities), history_s=history_windows * window_s, seed=seed)
-    return recording.to_sample().without_ground_truth()
+    sample = simulate_sample(entry.spec, condition, sensor=sensor, seed=seed, modalities=modalities,
+                             history_s=history_windows * window_s)
+    return sample.without_ground_truth()
 
 
 def cut_spike_window(sample: Any, planes: int) -> Any:
@@ -247,7 +248,8 @@ def one_line(exc: BaseException) -> str:
     return " | ".join(p.strip() for p in text.splitlines() if p.strip())
 
 
-def create_methods(names: Sequence[str]) -> dict[str, tuple[Any, str]]:
+def create_methods(names: Sequence[str], *, weights_dir: str | os.PathLike | None = None,
+                   device: str = "cpu") -> dict[str, tuple[Any, str]]:
     """``{name: (method or None, reason)}``: each method created once; a failure gives ``None`` and
     ``"skipped: ..."`` (``MethodUnavailable``) or ``"error: ..."`` (anything else)."""
     from neuspike import methods as registry
@@ -255,7 +257,7 @@ def create_methods(names: Sequence[str]) -> dict[str, tuple[Any, str]]:
     out: dict[str, tuple[Any, str]] = {}
     for name in names:
         try:
-            out[name] = (registry.create(name), "")
+            out[name] = (registry.create(name, weights_dir=weights_dir, device=device), "")
         except registry.MethodUnavailable as exc:
             out[name] = (None, f"skipped: {one_line(exc)}")
         except Exception as exc:  # a method that cannot even be created is a row, not a crash
@@ -283,6 +285,7 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
 
 def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: int, warmup: int,
             history_windows: float = DEFAULT_HISTORY_WINDOWS, seed: int = 0,
+            weights_dir: str | os.PathLike | None = None, device: str = "cpu",
             log: Callable[[str], Any] | None = None) -> pd.DataFrame:
     """Table 2 rows (:data:`TIMING_COLUMNS`): every method at every size.
 
@@ -293,7 +296,7 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
 
     repeats = check_count("repeats", repeats, 1)
     warmup = check_count("warmup", warmup, 0)
-    created = create_methods(names)
+    created = create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for name, (method, _) in created.items() if method is not None for m in method.inputs}
     rows = []
     for width, height in sizes:
@@ -405,7 +408,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--repeats", type=int, help="timed calls per method and size (overrides --quick/--full)")
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
-    parser.add_argument("--weights", help="folder of learned weights (sets NEUSPIKE_WEIGHTS)")
+    parser.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
+                                          "the suite's own trained weights need no flag")
+    parser.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -444,14 +449,14 @@ def run(args: argparse.Namespace) -> Path:
     """Run a parsed ``bench.timing`` command; return the output folder."""
     import torch
 
-    from bench.cache import write_json_atomic, write_text_atomic
+    from neuspike.atomic import write_json, write_text
     from bench.provenance import machine, now_iso, package_versions, source_state
     from bench.report import write_timing_tables
 
-    if args.weights is not None:
-        if not Path(args.weights).is_dir():
-            raise InputError(f"--weights: {args.weights!r} is not a folder")
-        os.environ[WEIGHTS_ENV] = str(Path(args.weights).resolve())
+    weights = weights_dir_from_env(args.weights)
+    if weights is not None and not weights.is_dir():
+        origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
+        raise InputError(f"{origin}: {str(weights)!r} is not a folder")
     if args.threads is not None:
         torch.set_num_threads(check_count("--threads", args.threads, 1))
     preset = FULL if args.full else QUICK
@@ -465,18 +470,19 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "weights": os.environ.get(WEIGHTS_ENV)}}
-    write_json_atomic(out / "config.json", config)
+                         "weights": str(weights) if weights is not None else None}}
+    write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": [sys.executable, *sys.argv], "executor": {"executor": "timing", "workers": 1},
             "threads": torch.get_num_threads(), "timing_contended": False, "start": now_iso(), "end": None}
-    write_json_atomic(out / "metadata.json", meta)
+    write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
+                     weights_dir=weights, device=args.device,
                      log=lambda s: print(s, file=sys.stderr, flush=True))
-    write_text_atomic(out / "timing.csv", tb.to_csv_text(timing))
+    write_text(out / "timing.csv", tb.to_csv_text(timing))
     meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0}
-    write_json_atomic(out / "metadata.json", meta)
+    write_json(out / "metadata.json", meta)
     write_timing_tables(out / "tables", timing, meta)
 
     results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
@@ -487,7 +493,7 @@ def run(args: argparse.Namespace) -> Path:
         if not (results_dir / "results.csv").is_file():
             raise InputError(f"--results: {results_dir} holds no results.csv")
         joined = join_accuracy(read_results(results_dir / "results.csv"), timing, str(results_dir))
-        write_text_atomic(acc_path, tb.to_csv_text(joined))
+        write_text(acc_path, tb.to_csv_text(joined))
         print(f"accuracy against time: sweep results from {results_dir}", file=sys.stderr)
     elif acc_path.exists():
         acc_path.unlink()  # a chart from an earlier run would not match these timings

@@ -9,11 +9,14 @@ owner, which would leak into every output.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
+
+from neuspike.jsonio import json_default
 
 
 def _umask() -> int:
@@ -54,12 +57,29 @@ def replacing(path: str | os.PathLike) -> Iterator[str]:
         raise
 
 
-def write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically; on any error the destination is untouched."""
+def write_with(path: str | os.PathLike, write: Callable[[Any], Any]) -> Path:
+    """Write a file atomically and durably: ``write(fileobj)`` fills a temporary file beside ``path``
+    (created with its parent folders), which is flushed to disk and then replaces ``path`` in one
+    step. A crash leaves either the old file or the new one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with replacing(path) as tmp, open(tmp, "wb") as f:
-        f.write(data)
+        write(f)
+        f.flush()
+        os.fsync(f.fileno())
+    return path
 
 
-def write_text(path: str | os.PathLike, text: str) -> None:
+def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically; on any error the destination is untouched."""
+    return write_with(path, lambda f: f.write(data))
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
-    write_bytes(path, text.encode("utf-8"))
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> Path:
+    """Write indented, key-sorted JSON atomically (NumPy values, dataclasses, sets and paths encoded)."""
+    return write_text(path, json.dumps(obj, indent=2, sort_keys=True, default=json_default) + "\n")

@@ -65,3 +65,31 @@ def check_positive_int(name: str, value: Any) -> int:
 def check_size(name: str, width: Any, height: Any) -> tuple[int, int]:
     """Return ``(width, height)`` as ints, raising unless both are whole numbers >= 1."""
     return check_positive_int(f"{name} width", width), check_positive_int(f"{name} height", height)
+
+
+def check_spike_window(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
+    """Validate a spike window and a key plane; return them as ``(bool array, int)``.
+
+    Parameters
+    ----------
+    planes : ndarray of bool, shape (T, H, W), T >= 1
+    key_plane : int in [0, T)
+
+    Raises
+    ------
+    InputError
+        On a wrong type, dtype, shape or an out-of-range key plane.
+    """
+    if not isinstance(planes, np.ndarray):
+        raise InputError(f"planes: expected a numpy array of bool (T, H, W), got {type(planes).__name__}")
+    if planes.ndim != 3:
+        raise InputError(f"planes: expected shape (T, H, W), got {planes.shape}")
+    if planes.dtype != np.bool_:
+        raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
+    if planes.shape[0] < 1:
+        raise InputError(f"planes: expected at least one plane, got shape {planes.shape}")
+    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
+        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
+    if not 0 <= key_plane < planes.shape[0]:
+        raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
+    return planes, int(key_plane)

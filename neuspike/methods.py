@@ -7,15 +7,24 @@ and a short label of the normalisation it applied (e.g. ``"gain"`` when the stre
 divided out, ``"robust-p99"`` when it was not known); :meth:`Method.reconstruct` checks the inputs
 and the output and records the label in ``last_normalisation``.
 
-Variants are registry entries over one implementation: ``register("tfp-w8", TFP, window=8)``.
-Methods from other packages register through the entry-point group ``neuspike.methods``: each
-entry point names a callable that is called with no arguments and registers its methods (the
-suite's own baselines arrive the same way, so this package never imports them).
+Variants are registry entries over one implementation: ``register("tfp-w8", TFP, params={"window": 8})``.
+A learned method's entry declares its weights file (``register(..., weights="x.safetensors")``);
+:func:`create` then passes that file name, the user's ``weights_dir`` and the ``device`` to the
+factory (:class:`neuspike.learned.LearnedMethod`). Nothing here reads the environment.
+
+One registration contract for everything: a module, an entry point of the group ``neuspike.methods``
+or a ``--plugin`` file provides ``register_methods(register)``, a callable that receives
+:func:`register` and adds its methods with it. The suite's own baselines arrive the same way (so this
+package never imports them), and so do the core's networks (:mod:`neuspike.nets`).
+
+What a call reports besides the image is declared on :class:`Method`: ``last_normalisation`` (the
+read-out's label) and ``last_steps`` (for recurrent methods, the network steps the call ran).
 """
 
 from __future__ import annotations
 
 import abc
+import os
 import threading
 from dataclasses import dataclass, field
 from importlib import metadata
@@ -51,7 +60,10 @@ class Method(abc.ABC):
     def __init__(self, name: str | None = None, **params: Any) -> None:
         self.name = name or type(self).__name__.lower()
         self.params: dict[str, Any] = dict(params)
+        #: Label of the normalisation the last call applied (set by :meth:`reconstruct`).
         self.last_normalisation: str | None = None
+        #: Network steps (event windows) the last call ran, for recurrent methods; ``None`` otherwise.
+        self.last_steps: int | None = None
 
     def reset(self) -> None:
         """Clear recurrent state (start of a new sequence). Stateless methods do nothing."""
@@ -118,6 +130,8 @@ class MethodEntry:
     params: Mapping[str, Any] = field(default_factory=dict)
     inputs: frozenset[str] = frozenset()
     description: str = ""
+    #: File name of a learned method's weights (``None`` for classical methods).
+    weights: str | None = None
 
 
 _REGISTRY: dict[str, MethodEntry] = {}
@@ -132,8 +146,11 @@ def register(
     params: Mapping[str, Any] | None = None,
     inputs: frozenset[str] | set[str] | None = None,
     description: str = "",
+    weights: str | None = None,
 ) -> MethodEntry:
     """Add a method (or a variant of one) to the registry.
+
+    ``weights`` names a learned method's weights file; :func:`create` resolves it.
 
     Raises
     ------
@@ -145,7 +162,9 @@ def register(
     ins = frozenset(inputs if inputs is not None else getattr(factory, "inputs", frozenset()))
     if not ins or not ins <= {"spikes", "events"}:
         raise InputError(f"method {name!r}: inputs must be a non-empty subset of {{'spikes', 'events'}}, got {sorted(ins)}")
-    entry = MethodEntry(name, factory, MappingProxyType(dict(params or {})), ins, description)
+    if weights is not None and (not isinstance(weights, str) or not weights.strip()):
+        raise InputError(f"method {name!r}: weights must be a file name, got {weights!r}")
+    entry = MethodEntry(name, factory, MappingProxyType(dict(params or {})), ins, description, weights)
     with _LOCK:
         if name in _REGISTRY:
             raise InputError(f"method {name!r} is already registered")
@@ -162,7 +181,7 @@ def unregister(name: str) -> None:
 
 
 def load_entry_points(force: bool = False) -> list[str]:
-    """Call every ``neuspike.methods`` entry point once; return the problems met (if any)."""
+    """Call every ``neuspike.methods`` entry point once with :func:`register`; return the problems met."""
     global _ENTRY_POINTS_LOADED
     if _ENTRY_POINTS_LOADED and not force:
         return []
@@ -170,7 +189,7 @@ def load_entry_points(force: bool = False) -> list[str]:
     problems = []
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
-            ep.load()()
+            ep.load()(register)
         except Exception as exc:  # a broken plug-in must not hide the others
             problems.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
     return problems
@@ -191,10 +210,27 @@ def entry(name: str) -> MethodEntry:
         raise InputError(f"unknown method {name!r}; available: {', '.join(sorted(_REGISTRY)) or 'none'}") from None
 
 
-def create(name: str, **overrides: Any) -> Method:
-    """Instantiate a registered method, with optional parameter overrides."""
+def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: str = "cpu",
+           **overrides: Any) -> Method:
+    """Instantiate a registered method, with optional parameter overrides.
+
+    Parameters
+    ----------
+    name : str
+        A registered name.
+    weights_dir : path or None
+        Folder of published weights the user named (learned methods only; their own shipped
+        weights are found without it).
+    device : str
+        Torch device of a learned method (default ``"cpu"``); classical methods ignore it.
+    **overrides
+        Parameters that replace the entry's.
+    """
     e = entry(name)
     params = {**e.params, **overrides}
+    if e.weights is not None:
+        params.setdefault("weights_file", e.weights)
+        params.update(weights_dir=weights_dir, device=device)
     method = e.factory(name=name, **params)
     if not isinstance(method, Method):
         raise NeuSpikeError(f"factory of {name!r} returned {type(method).__name__}, not a Method")

@@ -16,23 +16,18 @@ a run whose checks fail.
 from __future__ import annotations
 
 import argparse
-import inspect
-import os
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence, TextIO
+from typing import Any, Sequence, TextIO
 
 import numpy as np
 
 from neuspike.atomic import write_bytes
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
-#: Environment variable naming the folder of learned methods' weights (``--weights`` overrides it).
-WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
-#: Keyword a method factory must name explicitly to receive the weights folder.
-WEIGHTS_KEYWORD = "weights_dir"
 #: The data range every metric is computed with (methods return images in [0, 1]).
 DATA_RANGE = 1.0
 #: Command-line flag of each input modality.
@@ -57,6 +52,7 @@ class ReconstructSpec:
     window_planes: int | None = None
     weights: Path | None = None
     gt: Path | None = None
+    device: str = "cpu"
 
 
 @dataclass(frozen=True)
@@ -140,7 +136,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: a simulated window's own length, else 256)")
     p.add_argument("--weights", type=Path, metavar="DIR",
-                   help=f"folder of learned methods' weights (default: ${WEIGHTS_ENV})")
+                   help=f"folder of published weights, e.g. FireNet's (default: ${WEIGHTS_ENV}); "
+                        "the suite's own trained weights ship with it and need no flag")
+    p.add_argument("--device", default="cpu",
+                   help="torch device of learned methods (default: cpu; e.g. cuda)")
     p.add_argument("--gt", type=Path, metavar="IMAGE", help="ground-truth image (.png or .npy) for PSNR and SSIM")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     return p
@@ -171,16 +170,6 @@ def _warn_entry_point_problems() -> None:
 
     for problem in load_entry_points():
         print(f"warning: {problem}", file=sys.stderr)
-
-
-def _accepts_weights(factory: Callable[..., Any]) -> bool:
-    """Whether ``factory`` names ``weights_dir`` explicitly (a bare ``**params`` does not count)."""
-    try:
-        sig = inspect.signature(factory)
-    except (TypeError, ValueError):
-        return False
-    param = sig.parameters.get(WEIGHTS_KEYWORD)
-    return param is not None and param.kind in (param.POSITIONAL_OR_KEYWORD, param.KEYWORD_ONLY)
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
@@ -227,14 +216,10 @@ def _prepare_methods(spec: ReconstructSpec) -> list[Any]:
             flags = " and ".join(INPUT_FLAGS[m] for m in missing)
             raise InputError(f"method {name!r} needs {flags} (it reads {', '.join(sorted(e.inputs))})")
         entries.append(e)
-    weights = spec.weights if spec.weights is not None else (
-        Path(os.environ[WEIGHTS_ENV]) if os.environ.get(WEIGHTS_ENV) else None
-    )
     methods = []
     for e in entries:
-        kwargs = {WEIGHTS_KEYWORD: weights} if weights is not None and _accepts_weights(e.factory) else {}
         try:
-            methods.append(create(e.name, **kwargs))
+            methods.append(create(e.name, weights_dir=spec.weights, device=spec.device))
         except MethodUnavailable as exc:
             raise MethodUnavailable(f"method {e.name!r} is unavailable: {exc}") from None
     return methods
@@ -304,7 +289,7 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
         methods=_split_methods(args.method), out=args.out, spikes=args.spikes, events=args.events,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
         plane=args.plane, at_s=args.at_s, gain=args.gain, window_planes=args.window_planes,
-        weights=args.weights, gt=args.gt,
+        weights=weights_dir_from_env(args.weights), gt=args.gt, device=args.device,
     )
 
 

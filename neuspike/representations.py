@@ -18,7 +18,7 @@ from neuspike.checks import check_positive_int
 from neuspike.errors import InputError
 from neuspike.streams import EventStream
 
-__all__ = ["voxel_grid", "normalize_voxel_grid", "spike_bins"]
+__all__ = ["voxel_grid", "normalize_voxel_grid", "spike_bins", "spike_count"]
 
 
 def normalize_voxel_grid(grid: np.ndarray) -> np.ndarray:
@@ -170,3 +170,34 @@ def spike_bins(planes: np.ndarray, bins: int) -> np.ndarray:
     for b in range(bins):
         counts[b] = a[b * per:(b + 1) * per].sum(axis=0, dtype=np.uint32)
     return counts
+
+
+# A uint8 accumulator holds the count of up to 255 planes.
+_UINT8_PLANES = 255
+
+
+def spike_count(planes: np.ndarray) -> np.ndarray:
+    """Spikes per pixel over all planes of ``planes``.
+
+    Parameters
+    ----------
+    planes : ndarray of bool, shape (T, H, W)
+
+    Returns
+    -------
+    ndarray of unsigned integers, shape (H, W): uint8 when T <= 255, else uint32.
+    """
+    n = planes.shape[0]
+    u8 = planes.view(np.uint8)  # bool and uint8 share their layout: 0 or 1 per byte
+    if n <= _UINT8_PLANES:
+        hw = planes.shape[1] * planes.shape[2]
+        if hw % 8 == 0 and planes.flags.c_contiguous:
+            # Eight pixels per 64-bit word: each byte lane sums at most 255 ones, so no carry
+            # crosses into the next pixel, and viewing the word sums as bytes gives the counts.
+            words = u8.reshape(n, hw // 8 * 8).view(np.uint64)
+            return np.add.reduce(words, axis=0).view(np.uint8).reshape(planes.shape[1:])
+        return np.add.reduce(u8, axis=0, dtype=np.uint8)
+    count = np.zeros(planes.shape[1:], dtype=np.uint32)
+    for s in range(0, n, _UINT8_PLANES):
+        count += np.add.reduce(u8[s : s + _UINT8_PLANES], axis=0, dtype=np.uint8)
+    return count

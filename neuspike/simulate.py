@@ -30,7 +30,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
@@ -38,11 +38,19 @@ from neuspike.atomic import write_bytes, write_text
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.sample import Sample
 from neuspike.rng import derive_rng
+from neuspike.scenes import SceneSpec, make_scene
 from neuspike.streams import EventStream, SpikeStream
+
+if TYPE_CHECKING:
+    from neuspike.cache import RecordingCache
 
 #: Bump when a change alters simulated bytes for the same inputs (part of every cache key).
 SIMULATOR_VERSION = "1"
+#: Event history simulated before a window for recurrent methods to warm up on, in window durations
+#: (the default of the sweeps and the timing benchmark alike).
+DEFAULT_HISTORY_WINDOWS = 5.0
 MODALITIES = (SPIKES, EVENTS)
 
 
@@ -96,10 +104,8 @@ class Recording:
     window_end_s: float
     meta: dict[str, Any] = field(default_factory=dict)
 
-    def to_sample(self):  # -> neuspike.sample.Sample
+    def to_sample(self) -> Sample:
         """The recording as a method's :class:`~neuspike.sample.Sample` (ground truth clipped to [0, 1])."""
-        from neuspike.sample import Sample
-
         h, w = self.ground_truth.shape
         return Sample(
             height=h,
@@ -270,6 +276,82 @@ def simulate_window(
         key_time_s=meta["key_time_s"], window_start_s=0.0,
         window_end_s=sensor.planes / sensor.plane_rate_hz, meta=meta,
     )
+
+
+def sample_rng(seed: int, scene_spec: SceneSpec, condition: Condition) -> np.random.Generator:
+    """The generator of every random draw of one simulated sample: derived from (seed, scene, condition)."""
+    return derive_rng(seed, "cell", scene_spec.as_dict(), condition.as_dict())
+
+
+def simulate_recording(
+    scene_spec: SceneSpec,
+    condition: Condition,
+    *,
+    sensor: SensorConfig,
+    seed: int,
+    modalities: Iterable[str] = MODALITIES,
+    history_s: float = 0.0,
+    cache: "RecordingCache | None" = None,
+) -> tuple[Recording, bool]:
+    """One window of ``scene_spec`` under ``condition``, simulated or taken from ``cache``.
+
+    This is the one way from a (scene, condition, seed) cell to a recording: the sweeps, the timing
+    benchmark, the tests and the training datasets all come through it, so the same arguments give
+    the same bytes everywhere. Random draws come from :func:`sample_rng`.
+
+    Parameters
+    ----------
+    scene_spec : SceneSpec
+        What to render (built with :func:`neuspike.scenes.make_scene`).
+    condition : Condition
+        Light, motion, noise and declared effects.
+    sensor : SensorConfig
+        Window length, plane rate, thresholds.
+    seed : int
+        The cell's seed.
+    modalities : iterable of {"spikes", "events"}
+        What to simulate; a modality nobody consumes is not simulated.
+    history_s : float
+        Seconds of event history before the window (warm-up of recurrent methods).
+    cache : neuspike.cache.RecordingCache or None
+        Where recordings are kept between runs; ``None`` always simulates.
+
+    Returns
+    -------
+    (Recording, bool)
+        The recording and whether it came from the cache.
+    """
+    from neuspike.cache import RecordingCache, recording_key  # the cache stores Recordings: a cycle
+
+    mods = _check_modalities(modalities)
+
+    def simulate() -> Recording:
+        return simulate_window(make_scene(scene_spec), condition, rng=sample_rng(seed, scene_spec, condition),
+                               sensor=sensor, modalities=mods, history_s=history_s, seed=seed)
+
+    if cache is None:
+        return simulate(), False
+    if not isinstance(cache, RecordingCache):
+        raise InputError(f"cache: expected a RecordingCache or None, got {type(cache).__name__}")
+    key = recording_key(scene_spec=scene_spec, condition=condition, sensor=sensor, seed=seed,
+                        modalities=mods, history_s=history_s)
+    return cache.get_or_simulate(key, simulate)
+
+
+def simulate_sample(
+    scene_spec: SceneSpec,
+    condition: Condition,
+    *,
+    sensor: SensorConfig,
+    seed: int,
+    modalities: Iterable[str] = MODALITIES,
+    history_s: float = 0.0,
+    cache: "RecordingCache | None" = None,
+) -> Sample:
+    """The :class:`~neuspike.sample.Sample` of :func:`simulate_recording` (ground truth clipped to [0, 1])."""
+    recording, _ = simulate_recording(scene_spec, condition, sensor=sensor, seed=seed, modalities=modalities,
+                                      history_s=history_s, cache=cache)
+    return recording.to_sample()
 
 
 def simulate_sequence(
@@ -570,7 +652,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from neuspike.scenes import SceneSpec, make_scene
 
     modalities = _check_modalities(m.strip() for m in args.modalities.split(",") if m.strip())
     sensor = SensorConfig(planes=args.planes, plane_rate_hz=args.plane_rate, spike_threshold=args.threshold,

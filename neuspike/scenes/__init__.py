@@ -23,7 +23,8 @@ from neuspike.scenes.photos import (
 )
 from neuspike.scenes.radiance import luma_to_radiance
 from neuspike.scenes.sampling import mirror_index, sample_separable
-from neuspike.scenes.scene import Scene, check_times, make_scene
+from neuspike.scenes.make import BUILDERS, make_scene
+from neuspike.scenes.scene import Scene, check_times
 from neuspike.scenes.spec import DEFAULT_FOLDER_FPS, DEFAULT_SIZE, KINDS, MAX_ZOOM_EXPONENT, SceneSpec
 from neuspike.scenes.still import StillScene
 from neuspike.scenes.video import VideoScene, read_timestamps, read_video_source

@@ -119,36 +119,3 @@ def focus_of(spec: SceneSpec, width: int, height: int) -> tuple[float, float]:
     if spec.focus is None:
         return (width - 1) / 2.0, (height - 1) / 2.0
     return spec.focus
-
-
-def make_scene(spec: SceneSpec) -> Scene:
-    """Build the scene a spec describes.
-
-    Parameters
-    ----------
-    spec : SceneSpec
-
-    Returns
-    -------
-    Scene
-        Of the spec's kind; renders radiance frames of ``spec.size`` (for video, the source
-        size when ``spec.size`` is None).
-
-    Raises
-    ------
-    InputError
-        For a spec that is not a :class:`SceneSpec`, or image content that is not valid.
-    SourceError
-        For an image or video that cannot be read (the message names the path).
-    """
-    if not isinstance(spec, SceneSpec):
-        raise InputError(f"spec: expected a SceneSpec, got {type(spec).__name__}")
-    from neuspike.scenes.fan import FanScene
-    from neuspike.scenes.pan import PanScene
-    from neuspike.scenes.still import StillScene
-    from neuspike.scenes.video import VideoScene
-    from neuspike.scenes.zoom import ZoomScene
-
-    builders = {"pan": PanScene, "zoom": ZoomScene, "fan": FanScene, "still": StillScene,
-                "video": VideoScene}
-    return builders[spec.kind](spec)

@@ -50,9 +50,9 @@ KEY_S = 0.5 * WINDOW_END_S
 def local_registry() -> dict:
     entries: dict = {}
 
-    def register(name, factory, *, params=None, inputs=None, description=""):
+    def register(name, factory, *, params=None, inputs=None, description="", weights=None):
         assert name not in entries
-        entries[name] = (factory, dict(params or {}))
+        entries[name] = (factory, dict(params or {}, **({"weights_file": weights} if weights else {})))
 
     for module in (event_module, firenet_module, fusion_module):
         module.register_methods(register)

@@ -18,17 +18,16 @@ import baselines.event_integration as event_module
 import baselines.firenet as firenet_module
 from baselines.firenet import (
     NUM_BINS,
-    WEIGHTS_ENV,
     FireNet,
     FireNetModule,
     event_windows,
-    find_weights,
     load_firenet,
     map_state_dict,
 )
 from neuspike.conditions import Condition
 from neuspike.errors import FormatError, InputError
 from neuspike.methods import MethodUnavailable
+from neuspike.weights import PACKAGE_WEIGHTS, WEIGHTS_ENV, WeightsNotFound, resolve_weights
 from neuspike.metrics import ssim
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
@@ -154,22 +153,21 @@ def test_tampered_checkpoints_raise_format_error(tmp_path):
 
 
 def test_missing_weights_make_the_method_unavailable(monkeypatch, tmp_path):
-    monkeypatch.delenv(WEIGHTS_ENV, raising=False)
-    with pytest.raises(MethodUnavailable, match=WEIGHTS_ENV):
+    monkeypatch.setenv(WEIGHTS_ENV, str(WEIGHTS))  # library code never reads the environment
+    with pytest.raises(WeightsNotFound, match="--weights") as info:
         FireNet(weights_file="firenet.pt", normalize=True)
-    with pytest.raises(MethodUnavailable, match="not found"):
+    assert isinstance(info.value, MethodUnavailable)
+    with pytest.raises(WeightsNotFound, match="not found") as info:
         FireNet(weights_file="firenet.pt", normalize=True, weights_dir=tmp_path)
-    monkeypatch.setenv(WEIGHTS_ENV, str(tmp_path))
-    with pytest.raises(MethodUnavailable, match="not found"):
-        find_weights("firenet.pt", None)
+    # every path tried is named: the sub-folder, the folder, the package's own weights
+    for path in (tmp_path / "firenet" / "firenet.pt", tmp_path / "firenet.pt", PACKAGE_WEIGHTS / "firenet.pt"):
+        assert str(path) in str(info.value)
 
 
 @needs_weights
-def test_weights_are_found_from_the_environment_or_the_folder(monkeypatch):
-    monkeypatch.setenv(WEIGHTS_ENV, str(WEIGHTS))
-    assert find_weights("firenet.pt", None) == WEIGHTS / "firenet" / "firenet.pt"
-    monkeypatch.delenv(WEIGHTS_ENV)
-    assert find_weights("firenet_plus.pt", WEIGHTS / "firenet") == WEIGHTS / "firenet" / "firenet_plus.pt"
+def test_weights_are_found_in_the_folder_or_its_firenet_subfolder():
+    assert resolve_weights("firenet.pt", WEIGHTS, subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet.pt"
+    assert resolve_weights("firenet_plus.pt", WEIGHTS / "firenet", subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet_plus.pt"
     assert FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS).parameter_count() == PARAMETERS
 
 
@@ -285,8 +283,8 @@ def test_module_has_the_published_parameter_count():
 @needs_weights
 @pytest.mark.parametrize("native, expected", [(True, "bfloat16"), (False, "float32")])
 def test_auto_precision_follows_the_cpu_and_is_recorded(monkeypatch, native, expected):
-    import baselines.firenet as fn
+    import neuspike.learned as learned
 
-    monkeypatch.setattr(fn, "native_bfloat16", lambda: native)
-    method = fn.FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS)
+    monkeypatch.setattr(learned, "native_bfloat16", lambda: native)
+    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS)
     assert method.params["precision"] == expected

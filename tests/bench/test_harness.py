@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from bench import grid as grids
-from bench.cache import load_recording, save_recording
+from neuspike.cache import load_recording, save_recording
 from bench.cells import forget_plugin, load_plugins
 from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
 from bench.sweep import ConfigMismatch, Execution, SweepSpec, main, run_sweep

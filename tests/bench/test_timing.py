@@ -70,13 +70,13 @@ class FakeRecurrent:
 
     def __init__(self):
         self.resets = 0
-        self.windows_used = 0
+        self.last_steps = 0
 
     def reset(self):
         self.resets += 1
 
     def reconstruct(self, sample):
-        self.windows_used = 4
+        self.last_steps = 4
         return sample
 
 

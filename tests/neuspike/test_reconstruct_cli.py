@@ -12,7 +12,7 @@ import pytest
 from neuspike import methods as registry
 from neuspike import metrics
 from neuspike.methods import Method
-from neuspike.reconstruct import ReconstructSpec, _prepare_methods, main
+from neuspike.reconstruct import ReconstructSpec, _prepare_methods, build_parser, main, spec_from_args
 
 
 def _has(module: str) -> bool:
@@ -51,8 +51,8 @@ class EventsMethod(Method):
 class WeightsMethod(Method):
     inputs = frozenset({"spikes"})
 
-    def __init__(self, name=None, *, weights_dir=None):
-        super().__init__(name, weights_dir=weights_dir)
+    def __init__(self, name=None, *, weights_file, weights_dir=None, device="cpu"):
+        super().__init__(name, weights_file=weights_file, device=device)
         self.weights_dir = weights_dir
 
     def _reconstruct(self, sample):
@@ -64,7 +64,7 @@ def dummies():
     registry.available()  # load the installed entry points first, as a user's run does
     registry.register(SPIKES_NAME, RateMethod, description="test: mean rate over max")
     registry.register(EVENTS_NAME, EventsMethod)
-    registry.register(WEIGHTS_NAME, WeightsMethod)
+    registry.register(WEIGHTS_NAME, WeightsMethod, weights="test.safetensors")
     yield
     for name in (SPIKES_NAME, EVENTS_NAME, WEIGHTS_NAME):
         registry.unregister(name)
@@ -138,16 +138,20 @@ def test_missing_file_and_usage_errors_exit_2(dummies, tmp_path, capsys):
     assert "--out" in capsys.readouterr().err
 
 
-def test_weights_folder_reaches_only_factories_that_name_it(dummies, tmp_path, monkeypatch):
+def test_weights_folder_reaches_only_entries_that_declare_weights(dummies, tmp_path, monkeypatch):
     monkeypatch.delenv("NEUSPIKE_WEIGHTS", raising=False)
     spec = ReconstructSpec(methods=(WEIGHTS_NAME, SPIKES_NAME), out=tmp_path, spikes=tmp_path / "s.npz",
                            weights=tmp_path / "w")
     with_weights, plain = _prepare_methods(spec)
     assert with_weights.weights_dir == tmp_path / "w"
-    assert "weights_dir" not in plain.params
+    assert with_weights.params == {"weights_file": "test.safetensors", "device": "cpu"}
+    assert "weights_dir" not in plain.params and "weights_file" not in plain.params
+    # only the command line reads the environment; the library takes the folder as given
     monkeypatch.setenv("NEUSPIKE_WEIGHTS", str(tmp_path / "env"))
-    (from_env,) = _prepare_methods(ReconstructSpec(methods=(WEIGHTS_NAME,), out=tmp_path, spikes=tmp_path / "s.npz"))
-    assert from_env.weights_dir == tmp_path / "env"
+    (no_env,) = _prepare_methods(ReconstructSpec(methods=(WEIGHTS_NAME,), out=tmp_path, spikes=tmp_path / "s.npz"))
+    assert no_env.weights_dir is None
+    args = build_parser().parse_args(["--method", WEIGHTS_NAME, "--spikes", "s.npz", "--out", str(tmp_path)])
+    assert spec_from_args(args).weights == (tmp_path / "env").resolve()
 
 
 @needs_npz_reader

@@ -1,4 +1,4 @@
-"""The on-disk cache of simulated recordings.
+"""The on-disk cache of simulated recordings (used by the sweeps and by training datasets).
 
 A cell's recording is a deterministic function of the scene spec, the condition (with every
 declared stage), the sensor configuration, the seed, the simulated modalities, the event history
@@ -25,8 +25,6 @@ the arrays come back bit for bit.
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
 import json
 import os
 from pathlib import Path
@@ -34,63 +32,15 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from neuspike.atomic import replacing
+from neuspike.atomic import write_with
+from neuspike.conditions import Condition
 from neuspike.errors import FormatError
+from neuspike.jsonio import canonical_json, stable_hash
+from neuspike.scenes import SceneSpec
+from neuspike.simulate import SIMULATOR_VERSION, Recording, SensorConfig
+from neuspike.streams import EventStream, SpikeStream
 
 CACHE_FORMAT = "neuspike-recording-cache/1"
-
-
-# ----------------------------------------------------------------------------------------------
-# Canonical JSON, hashing and atomic writes (used across the harness)
-# ----------------------------------------------------------------------------------------------
-
-def json_default(value: Any) -> Any:
-    """JSON encoding of NumPy values, dataclasses, paths and sets (sorted)."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        as_dict = getattr(value, "as_dict", None)
-        return as_dict() if callable(as_dict) else dataclasses.asdict(value)
-    if isinstance(value, (set, frozenset)):
-        return sorted(value)
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    return repr(value)
-
-
-def canonical_json(obj: Any) -> str:
-    """Compact JSON with sorted keys: equal data give equal text."""
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=json_default)
-
-
-def stable_hash(obj: Any, length: int = 20) -> str:
-    """Hex SHA-256 of :func:`canonical_json` of ``obj``, cut to ``length`` characters."""
-    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:length]
-
-
-def write_bytes_atomic(path: str | os.PathLike, write: Callable[[Any], None]) -> Path:
-    """Write a file atomically: ``write(fileobj)`` fills a temporary file beside ``path``,
-    which then replaces ``path`` in one step. A crash leaves either the old file or the new one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with replacing(path) as tmp, open(tmp, "wb") as f:
-        write(f)
-        f.flush()
-        os.fsync(f.fileno())
-    return path
-
-
-def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
-    """Write UTF-8 text atomically (see :func:`write_bytes_atomic`)."""
-    data = text.encode("utf-8")
-    return write_bytes_atomic(path, lambda f: f.write(data))
-
-
-def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
-    """Write indented, key-sorted JSON atomically."""
-    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True, default=json_default) + "\n")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -99,9 +49,9 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> Path:
 
 def recording_key(
     *,
-    scene_spec: Any,
-    condition: Any,
-    sensor: Any,
+    scene_spec: SceneSpec,
+    condition: Condition,
+    sensor: SensorConfig,
     seed: int,
     modalities: Iterable[str],
     history_s: float,
@@ -123,8 +73,6 @@ def recording_key(
     str
         40 hex characters.
     """
-    from neuspike.simulate import SIMULATOR_VERSION
-
     return stable_hash({
         "format": CACHE_FORMAT,
         "simulator_version": SIMULATOR_VERSION,
@@ -150,7 +98,7 @@ def _from_json_bytes(array: np.ndarray) -> Any:
     return json.loads(array.tobytes().decode("utf-8"))
 
 
-def save_recording(path: str | os.PathLike, recording: Any) -> Path:
+def save_recording(path: str | os.PathLike, recording: Recording) -> Path:
     """Write a :class:`~neuspike.simulate.Recording` to ``path`` (npz, atomically)."""
     arrays: dict[str, np.ndarray] = {
         "format": np.frombuffer(CACHE_FORMAT.encode(), dtype=np.uint8),
@@ -170,10 +118,10 @@ def save_recording(path: str | os.PathLike, recording: Any) -> Path:
         e = recording.events
         arrays.update(event_t=e.t_s, event_x=e.x, event_y=e.y, event_p=e.p)
         arrays["event_json"] = _json_bytes({"width": e.width, "height": e.height, "meta": e.meta})
-    return write_bytes_atomic(path, lambda f: np.savez(f, **arrays))
+    return write_with(path, lambda f: np.savez(f, **arrays))
 
 
-def load_recording(path: str | os.PathLike) -> Any:
+def load_recording(path: str | os.PathLike) -> Recording:
     """Read a recording written by :func:`save_recording`.
 
     Raises
@@ -198,10 +146,7 @@ def load_recording(path: str | os.PathLike) -> Any:
         raise FormatError(f"{path}: invalid recording cache file ({type(exc).__name__}: {exc})") from exc
 
 
-def _recording_from(data: dict[str, np.ndarray], path: Path) -> Any:
-    from neuspike.simulate import Recording
-    from neuspike.streams import EventStream, SpikeStream
-
+def _recording_from(data: dict[str, np.ndarray], path: Path) -> Recording:
     spikes = events = None
     if "spike_bits" in data:
         t, h, w = (int(v) for v in data["spike_shape"])
@@ -234,7 +179,7 @@ class RecordingCache:
     def path(self, key: str) -> Path | None:
         return self.folder / f"{key}.npz" if self.folder is not None else None
 
-    def get_or_simulate(self, key: str, simulate: Callable[[], Any]) -> tuple[Any, bool]:
+    def get_or_simulate(self, key: str, simulate: Callable[[], Recording]) -> tuple[Recording, bool]:
         """The recording for ``key``: from the cache when present, else ``simulate()`` (then stored).
 
         Returns

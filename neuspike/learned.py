@@ -1,0 +1,198 @@
+"""The base of every learned reconstruction method: module, device, precision, encoding, strict weights.
+
+A learned method is a :class:`~neuspike.methods.Method` whose image comes from a torch module. The
+base owns what all of them share, written once:
+
+* **weights**: the registry entry declares the file's name (``register(..., weights="x.safetensors")``);
+  :func:`neuspike.methods.create` passes it with the user's ``weights_dir`` and the file is found by
+  :func:`neuspike.weights.resolve_weights` (the user's folder first, then the weights shipped in the
+  package). Loading is strict (:func:`neuspike.weights.load_state_strict`); our own weights are
+  safetensors, published ``.pt`` files are read weights-only by the subclass that needs them.
+* **device**: ``"cpu"`` by default; any torch device string the machine has (``"cuda"``,
+  ``"cuda:1"``) when asked for. Nothing is ever placed on a GPU unasked.
+* **precision** (:func:`resolve_precision`): ``"auto"`` picks bfloat16 where the device computes it
+  natively (on a CPU: AVX512-BF16 or AMX instructions, as torch reports them) and float32 elsewhere;
+  emulated bfloat16 is slower than float32. bfloat16 runs the module under autocast; recurrent states
+  stay float32 where the module keeps them so.
+* **encoding**: :meth:`LearnedMethod.encode` turns a sample into a list of *steps*, each a tuple of
+  tensors (1, C, H, W) that is one call of the module. A feed-forward network has one step; a
+  recurrent one has one per event window, its state carried from step to step and reset at the start
+  of every reconstruction (so the result does not depend on call history).
+* **read-out**: the last step's output (1, 1, H, W) becomes a float32 (H, W) image in [0, 1] by
+  :meth:`LearnedMethod.to_image` (default: clamp), and its label goes to ``last_normalisation``.
+
+Subclasses implement :meth:`build_module` and :meth:`encode`, and may override :meth:`load_weights`
+and :meth:`to_image`.
+"""
+
+from __future__ import annotations
+
+import abc
+import contextlib
+import os
+from pathlib import Path
+from typing import Any, ClassVar, Iterator, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from neuspike.errors import InputError
+from neuspike.methods import Method
+from neuspike.sample import Sample
+from neuspike.weights import file_sha256, load_safetensors, load_state_strict, resolve_weights
+
+__all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision"]
+
+PRECISIONS = ("auto", "float32", "bfloat16")
+#: Label of the default read-out: the module's output clamped to [0, 1].
+CLAMP = "clamp"
+
+
+def native_bfloat16() -> bool:
+    """Whether this CPU computes bfloat16 natively (AVX512-BF16 or AMX), as torch reports it."""
+    cpu = getattr(torch, "cpu", None)
+    for probe in ("_is_avx512_bf16_supported", "_is_amx_tile_supported"):
+        check = getattr(cpu, probe, None)
+        try:
+            if check is not None and check():
+                return True
+        except Exception:  # a private probe that changed shape: assume no native support
+            continue
+    return False
+
+
+def resolve_device(device: str | torch.device | None) -> torch.device:
+    """``device`` as a torch device (``None`` -> CPU); a device this machine lacks raises :class:`InputError`."""
+    try:
+        dev = torch.device("cpu" if device is None else device)
+    except (RuntimeError, TypeError) as exc:
+        raise InputError(f"device: {device!r} is not a torch device ({exc})") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise InputError(f"device: {device!r} was asked for but this machine has no CUDA device")
+    if dev.type not in ("cpu", "cuda", "mps", "xpu"):
+        raise InputError(f"device: {device!r} is not supported (cpu, cuda, mps or xpu)")
+    return dev
+
+
+def resolve_precision(precision: str, device: torch.device) -> str:
+    """``"auto"`` -> ``"bfloat16"`` where ``device`` computes it natively, else ``"float32"``."""
+    if precision not in PRECISIONS:
+        raise InputError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
+    if precision != "auto":
+        return precision
+    if device.type == "cpu":
+        return "bfloat16" if native_bfloat16() else "float32"
+    if device.type == "cuda":
+        return "bfloat16" if torch.cuda.is_bf16_supported() else "float32"
+    return "float32"
+
+
+class LearnedMethod(Method):
+    """Base of learned methods (module docstring).
+
+    Parameters
+    ----------
+    name : str or None
+        The registered name.
+    weights_file : str
+        File name of the weights (declared by the registry entry).
+    weights_dir : path or None
+        Folder the user named; ``None`` looks only at the weights shipped in the package.
+    device : str or torch.device
+        Where the module runs (default ``"cpu"``).
+    precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
+        Arithmetic of the module (see :func:`resolve_precision`); the choice made is recorded in
+        ``params["precision"]``.
+    **params
+        The subclass's own parameters (recorded in ``params``).
+
+    Raises
+    ------
+    neuspike.weights.WeightsNotFound
+        When the weights file is not found (a :class:`~neuspike.methods.MethodUnavailable`).
+    neuspike.errors.FormatError
+        When the file does not fit the module (missing, unused or mis-shaped tensors, truncation).
+    """
+
+    #: Sub-folders of a user's weights folder tried before the folder itself.
+    weights_subdirs: ClassVar[tuple[str, ...]] = ()
+    #: Label of :meth:`to_image`'s read-out.
+    output_label: ClassVar[str] = CLAMP
+
+    def __init__(self, name: str | None = None, *, weights_file: str,
+                 weights_dir: str | os.PathLike | None = None, device: str | torch.device = "cpu",
+                 precision: str = "auto", **params: Any) -> None:
+        dev = resolve_device(device)
+        precision = resolve_precision(precision, dev)
+        path = resolve_weights(str(weights_file), weights_dir, subdirs=self.weights_subdirs)
+        super().__init__(name, weights_file=str(weights_file), precision=precision, **params)
+        self.device = dev
+        self.weights_path: Path = path
+        self.weights_sha256 = file_sha256(path)
+        module = self.build_module()
+        self.load_weights(module, path)
+        self.module: nn.Module = module.to(dev).eval()
+        self._state: Any = None
+
+    # -- what a subclass provides ----------------------------------------------------------------
+
+    @abc.abstractmethod
+    def build_module(self) -> nn.Module:
+        """A fresh module with this method's architecture (untrained)."""
+
+    @abc.abstractmethod
+    def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
+        """The module's inputs for ``sample``: a list of steps, each a tuple of (1, C, H, W) CPU tensors."""
+
+    def load_weights(self, module: nn.Module, path: Path) -> None:
+        """Load ``path`` into ``module`` strictly (default: a safetensors file of our own)."""
+        load_state_strict(module, load_safetensors(path), str(path))
+
+    def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:
+        """The module's output (1, 1, H', W') as float32 (H, W) in [0, 1] (default: clamp, crop to the sample)."""
+        image = output[0, 0, : sample.height, : sample.width].float().clamp(0.0, 1.0)
+        return np.ascontiguousarray(image.cpu().numpy(), dtype=np.float32)
+
+    # -- written once ----------------------------------------------------------------------------
+
+    def parameter_count(self) -> int:
+        return int(sum(p.numel() for p in self.module.parameters()))
+
+    def reset(self) -> None:
+        """Forget the recurrent state (start of a new sequence)."""
+        self._state = None
+
+    def describe(self) -> dict[str, Any]:
+        info = super().describe()
+        info.update(weights_file=self.weights_path.name, weights_sha256=self.weights_sha256,
+                    device=str(self.device))
+        return info
+
+    @contextlib.contextmanager
+    def _autocast(self) -> Iterator[None]:
+        if self.params["precision"] == "bfloat16":
+            with torch.autocast(self.device.type, dtype=torch.bfloat16):
+                yield
+        else:
+            yield
+
+    def run_step(self, inputs: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """One call of the module on ``inputs`` (carrying the recurrent state); returns its output tensor."""
+        inputs = tuple(t.to(self.device) for t in inputs)
+        with torch.inference_mode(), self._autocast():
+            if self.recurrent:
+                out, self._state = self.module(*inputs, self._state)
+            else:
+                out = self.module(*inputs)
+        return out
+
+    def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
+        self.reset()
+        steps = self.encode(sample)
+        if not steps:
+            raise InputError(f"method {self.name!r}: the sample gave no input to the network")
+        for inputs in steps:
+            out = self.run_step(inputs)
+        self.last_steps = len(steps)
+        return self.to_image(out, sample), self.output_label
