@@ -111,6 +111,17 @@ class Method(abc.ABC):
         self.last_normalisation = label
         return image
 
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
+        """Streaming (:mod:`neuspike.video`): the image at ``sample.key_time_s``, continuing this sequence.
+
+        The first frame of a sequence goes through :meth:`reconstruct` (which warms up on the
+        sample's history); each later frame comes here with ``previous_s``, the key instant of the
+        previous frame. A recurrent method may override this to carry its state forward on the input
+        after ``previous_s`` only, instead of warming up again; the default is :meth:`reconstruct`,
+        which is exact for stateless methods.
+        """
+        return self.reconstruct(sample)
+
     def describe(self) -> dict[str, Any]:
         return {
             "name": self.name,
