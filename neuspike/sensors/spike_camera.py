@@ -16,6 +16,12 @@ Two effect stages exist, each run only when declared (:mod:`neuspike.conditions`
 The computation is :func:`integrate_and_fire`, a pure function; :class:`SpikeCamera` only holds
 the parameters, the frozen dark pattern and the charge that persists between captures.
 
+Two implementations give the same planes bit for bit (``backend=``): a fused compiled kernel
+(:mod:`neuspike.sensors.spike_kernels`, numba, threads over bands of rows) and the plain NumPy
+plane loop below, the reference and the fallback where numba cannot be imported. Either can emit
+the planes bit-packed in the Vidar ``.dat`` layout (:class:`PackedPlanes`), eight times smaller;
+the compiled kernel packs them as it goes.
+
 Arithmetic (float32, in this order, so that any implementation can be checked bit for bit)::
 
     q_k = float32(F_k) * float32(light)            once per frame
@@ -37,10 +43,13 @@ import numpy as np
 from neuspike.checks import check_ndim, check_nonnegative, check_positive, check_positive_int, check_size
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
+from neuspike.sensors.backends import resolve_backend
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = [
     "SPIKE_STAGES",
+    "PackedPlanes",
+    "pack_planes",
     "SpikeCamera",
     "draw_dark_charge",
     "draw_initial_charge",
@@ -110,6 +119,64 @@ def _frames_array(frames: Any) -> np.ndarray:
     return f
 
 
+class PackedPlanes:
+    """Spike planes bit-packed in the Vidar ``.dat`` layout (8 pixels per byte).
+
+    Each plane is flipped vertically (stored row ``s`` is image row ``H - 1 - s``) and flattened;
+    stored pixel ``p`` is bit ``p % 8`` of byte ``p // 8``, least significant bit first. ``data``
+    is therefore exactly the bytes of a ``.dat`` file, plane after plane.
+
+    Parameters
+    ----------
+    data : ndarray of uint8, shape (T, H * W / 8), C-contiguous
+    height, width : int
+        Sensor size H, W; ``H * W`` is a multiple of 8.
+    """
+
+    __slots__ = ("data", "height", "width")
+
+    def __init__(self, data: np.ndarray, *, height: int, width: int) -> None:
+        h, w = _check_shape("PackedPlanes shape", (height, width))
+        if (h * w) % 8:
+            raise InputError(f"PackedPlanes: H x W must be a multiple of 8 to pack, got {h} x {w}")
+        d = np.asarray(data)
+        if d.dtype != np.uint8 or d.ndim != 2 or d.shape[1] != h * w // 8:
+            raise InputError(f"PackedPlanes.data: expected uint8 of shape (T, {h * w // 8}), "
+                             f"got {d.dtype} {d.shape}")
+        self.data = np.ascontiguousarray(d)
+        self.height, self.width = h, w
+
+    @property
+    def num_planes(self) -> int:
+        return self.data.shape[0]
+
+    def unpack(self) -> np.ndarray:
+        """The planes as bool (T, H, W), row 0 at the top of the image, C-contiguous."""
+        t = self.data.shape[0]
+        bits = np.unpackbits(self.data, axis=1, bitorder="little").view(np.bool_)
+        return np.ascontiguousarray(bits.reshape(t, self.height, self.width)[:, ::-1, :])
+
+    def count(self) -> int:
+        """Number of spikes (set bits)."""
+        return int(np.bitwise_count(self.data).sum(dtype=np.int64))
+
+    def __repr__(self) -> str:
+        return f"PackedPlanes({self.num_planes} planes of {self.width}x{self.height})"
+
+
+def pack_planes(planes: np.ndarray) -> PackedPlanes:
+    """Bool planes (T, H, W) (row 0 at the top) packed in the ``.dat`` layout (:class:`PackedPlanes`)."""
+    p = np.asarray(planes)
+    check_ndim("planes", p, 3)
+    if p.dtype != np.bool_:
+        raise InputError(f"planes: expected bool spike planes, got dtype {p.dtype}")
+    t, h, w = p.shape
+    if (h * w) % 8:
+        raise InputError(f"planes: H x W must be a multiple of 8 to pack, got {h} x {w}")
+    stored = p[:, ::-1, :].reshape(t, h * w)
+    return PackedPlanes(np.packbits(stored, axis=1, bitorder="little"), height=h, width=w)
+
+
 def integrate_and_fire(
     frames: np.ndarray,
     *,
@@ -118,14 +185,16 @@ def integrate_and_fire(
     threshold: float,
     initial_charge: np.ndarray | None = None,
     dark_charge: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    packed: bool = False,
+    backend: str = "auto",
+) -> tuple[np.ndarray | PackedPlanes, np.ndarray]:
     """Integrate radiance frames into binary spike planes (reset by subtraction).
 
     Parameters
     ----------
     frames : ndarray, shape (K, H, W), floating point
-        Linear radiance, finite and >= 0 (1.0 = reference white). Converted to float32 frame by
-        frame (no full-size copy).
+        Linear radiance, finite and >= 0 (1.0 = reference white). Converted to float32 value by
+        value (no full-size copy).
     hold_planes : int
         Planes each frame is held for (``floor(T / S)`` in the paper's window mode; 1 in
         continuous mode, where every plane sees its own frame).
@@ -137,10 +206,17 @@ def integrate_and_fire(
         Charge at the start (any finite values, negative allowed); zeros when ``None``. Not modified.
     dark_charge : ndarray (H, W), optional
         Extra charge per plane (finite, >= 0), e.g. from :func:`draw_dark_charge`.
+    packed : bool
+        Return the planes bit-packed (:class:`PackedPlanes`, the ``.dat`` layout; ``H * W`` must
+        be a multiple of 8) instead of a bool array.
+    backend : {"auto", "numba", "numpy"}
+        ``"numba"``: the fused compiled kernel on ``numba.get_num_threads()`` threads;
+        ``"numpy"``: the plain NumPy plane loop; ``"auto"``: numba where it can be imported.
+        Same planes and charge, bit for bit.
 
     Returns
     -------
-    planes : ndarray of bool, shape (K * hold_planes, H, W), C-contiguous
+    planes : ndarray of bool, shape (K * hold_planes, H, W), C-contiguous, or PackedPlanes
         ``True`` where the pixel fired; plane ``k * hold_planes + i`` belongs to frame ``k``.
     final_charge : ndarray of float32, shape (H, W)
         The charge after the last plane. Charge is conserved:
@@ -149,8 +225,9 @@ def integrate_and_fire(
     Raises
     ------
     InputError
-        For NaN, infinite or negative radiance (naming the frame), shapes that disagree, or a
-        non-positive ``light``, ``threshold`` or ``hold_planes``.
+        For NaN, infinite or negative radiance (naming the first such frame), shapes that
+        disagree, a non-positive ``light``, ``threshold`` or ``hold_planes``, an unknown backend,
+        or ``packed`` with ``H * W`` not a multiple of 8.
 
     Notes
     -----
@@ -164,19 +241,72 @@ def integrate_and_fire(
     hold = check_positive_int("hold_planes", hold_planes)
     light32 = _as_float32("light", check_positive("light", light))
     thr32 = _as_float32("threshold", check_positive("threshold", threshold))
+    engine = resolve_backend(backend)
+    if packed and (h * w) % 8:
+        raise InputError(f"packed: H x W must be a multiple of 8 to pack planes, got {h} x {w}")
     if initial_charge is None:
         charge = np.zeros((h, w), np.float32)
     else:
         charge = _charge_map("initial_charge", initial_charge, (h, w), nonnegative=False)
     dark = None if dark_charge is None else _charge_map("dark_charge", dark_charge, (h, w), nonnegative=True)
 
-    planes = np.empty((k_frames * hold, h, w), dtype=np.bool_)
-    _integrate(f, hold, light32, thr32, charge, dark, planes)
+    if engine == "numba":
+        planes = _integrate_compiled(f, hold, light32, thr32, charge, dark, packed)
+    else:
+        planes = np.empty((k_frames * hold, h, w), dtype=np.bool_)
+        _integrate(f, hold, light32, thr32, charge, dark, planes)
+        if packed:
+            planes = pack_planes(planes)
     if not np.isfinite(charge).all():
         raise InputError(
             "frames: the charge overflowed float32; a frame holds +inf radiance or light * radiance is too large"
         )
     return planes, charge
+
+
+#: Pixels per band of the compiled kernel: a band's charge, input rows and output stay in the L1/L2
+#: caches through a plane, and a Vidar sensor (250 rows) still splits into enough bands for threads.
+_KERNEL_BAND_PIXELS = 8192
+
+
+def _band_rows(h: int, w: int, multiple: int) -> int:
+    rows = max(1, _KERNEL_BAND_PIXELS // w)
+    rows = -(-rows // multiple) * multiple
+    return min(rows, -(-h // multiple) * multiple)
+
+
+def _first_bad_frame(frames: np.ndarray) -> None:
+    """Raise for the first frame holding a value that is not >= 0 after conversion to float32."""
+    for k in range(frames.shape[0]):
+        frame = frames[k] if frames.dtype == np.float32 else frames[k].astype(np.float32)
+        lowest = np.minimum.reduce(frame, axis=None)
+        if not lowest >= 0:  # also true for NaN
+            raise InputError(f"frames[{k}]: expected finite radiance >= 0, got a minimum of {float(lowest)!r}")
+
+
+def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, threshold: np.float32,
+                        charge: np.ndarray, dark: np.ndarray | None, packed: bool) -> np.ndarray | PackedPlanes:
+    """The fused kernel, in place on ``charge``; validates the radiance from its counts."""
+    from neuspike.sensors import spike_kernels
+
+    k_frames, h, w = frames.shape
+    if frames.dtype not in (np.float32, np.float64):
+        frames = frames.astype(np.float32)  # float16 and the like: numba has no kernel for them
+    frames = np.ascontiguousarray(frames)
+    if packed:
+        rows = _band_rows(h, w, 8)
+        out = np.empty((k_frames * hold, h * w // 8), np.uint8)
+        kernel = spike_kernels.fire_packed
+    else:
+        rows = _band_rows(h, w, 1)
+        out = np.empty((k_frames * hold, h, w), np.bool_)
+        kernel = spike_kernels.fire_planes
+    negatives = np.zeros(-(-h // rows), np.int64)
+    kernel(frames, hold, light, threshold, charge, dark, rows, out, negatives)
+    # NaN and +inf cannot leave the charge, so a finite charge and no negative value mean valid input
+    if negatives.any() or not np.isfinite(charge).all():
+        _first_bad_frame(frames)
+    return PackedPlanes(out, height=h, width=w) if packed else out
 
 
 #: Bytes of per-pixel float32 state the plane loop aims to keep in cache at once (see _integrate).
@@ -346,6 +476,8 @@ class SpikeCamera:
     rng : numpy.random.Generator or None
         Source of the effect stages' random draws, made at construction in the order of
         :data:`SPIKE_STAGES`. May be ``None`` only when no effect is declared.
+    backend : {"auto", "numba", "numpy"}
+        Implementation of the plane loop (see :func:`integrate_and_fire`); never changes the planes.
 
     Notes
     -----
@@ -363,8 +495,10 @@ class SpikeCamera:
         plane_rate_hz: float = VIDAR_PLANE_RATE_HZ,
         effects: Iterable[Effect] = (),
         rng: np.random.Generator | None,
+        backend: str = "auto",
     ) -> None:
         self._width, self._height = check_size("SpikeCamera", width, height)
+        self._backend = resolve_backend(backend)
         self._light = check_positive("light", light)
         self._threshold = check_positive("threshold", threshold)
         _as_float32("light", self._light)
@@ -417,6 +551,11 @@ class SpikeCamera:
         return self._light / self._threshold
 
     @property
+    def backend(self) -> str:
+        """The implementation in use, ``"numba"`` or ``"numpy"``."""
+        return self._backend
+
+    @property
     def effects(self) -> tuple[Effect, ...]:
         """The declared stages, in the order they run."""
         return self._effects
@@ -464,6 +603,37 @@ class SpikeCamera:
         InputError
             For frames of the wrong size or invalid radiance; the camera's charge is then unchanged.
         """
+        planes, stages = self._expose(frames, hold_planes, start_s, packed=False)
+        return SpikeStream(
+            planes,
+            plane_rate_hz=self._plane_rate_hz,
+            start_s=float(start_s),
+            gain=self.gain,
+            threshold=self._threshold,
+            meta={"stages": stages, "spike_count": int(np.count_nonzero(planes))},
+        )
+
+    def capture_packed(self, frames: np.ndarray, *, hold_planes: int,
+                       start_s: float = 0.0) -> tuple[PackedPlanes, dict[str, Any]]:
+        """:meth:`capture` with the planes bit-packed in the ``.dat`` layout.
+
+        The same planes (and the same charge carried on) as :meth:`capture`, eight times smaller;
+        ``packed.data`` is exactly the bytes of a ``.dat`` file. ``W * H`` must be a multiple of 8.
+
+        Returns
+        -------
+        packed : PackedPlanes
+            ``K * hold_planes`` planes.
+        meta : dict
+            What :meth:`capture` records in ``SpikeStream.meta`` plus ``start_s``, ``gain``,
+            ``threshold`` and ``plane_rate_hz``.
+        """
+        packed, stages = self._expose(frames, hold_planes, start_s, packed=True)
+        meta = {"stages": stages, "spike_count": packed.count(), "start_s": float(start_s), "gain": self.gain,
+                "threshold": self._threshold, "plane_rate_hz": self._plane_rate_hz}
+        return packed, meta
+
+    def _expose(self, frames: np.ndarray, hold_planes: int, start_s: float, *, packed: bool):
         f = _frames_array(frames)
         if f.shape[1:] != (self._height, self._width):
             raise InputError(
@@ -477,7 +647,7 @@ class SpikeCamera:
         t0 = time.perf_counter()
         planes, charge = integrate_and_fire(
             f, hold_planes=hold, light=self._light, threshold=self._threshold,
-            initial_charge=self._charge, dark_charge=self._dark_charge,
+            initial_charge=self._charge, dark_charge=self._dark_charge, packed=packed, backend=self._backend,
         )
         seconds = time.perf_counter() - t0
         first = self._captures == 0
@@ -488,21 +658,15 @@ class SpikeCamera:
         ]
         stages.append({
             "name": "integrate_and_fire",
-            "params": {"light": self._light, "threshold": self._threshold, "hold_planes": hold},
+            "params": {"light": self._light, "threshold": self._threshold, "hold_planes": hold,
+                       "backend": self._backend},
             "seconds": seconds,
         })
         self._charge = charge
         self._captures += 1
-        return SpikeStream(
-            planes,
-            plane_rate_hz=self._plane_rate_hz,
-            start_s=start,
-            gain=self.gain,
-            threshold=self._threshold,
-            meta={"stages": stages, "spike_count": int(np.count_nonzero(planes))},
-        )
+        return planes, stages
 
     def __repr__(self) -> str:
         names = ", ".join(e.name for e in self._effects) or "none"
         return (f"SpikeCamera({self._width}x{self._height}, light={self._light:g}, threshold={self._threshold:g}, "
-                f"plane_rate_hz={self._plane_rate_hz:g}, effects: {names})")
+                f"plane_rate_hz={self._plane_rate_hz:g}, backend={self._backend}, effects: {names})")

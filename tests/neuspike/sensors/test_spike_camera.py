@@ -147,11 +147,12 @@ def test_charge_is_conserved_for_any_scene(scene):
 @given(scenes())
 def test_matches_the_plain_reference_loop_bit_for_bit(scene):
     frames, hold, light, threshold, initial, dark = scene
-    planes, final = integrate_and_fire(frames, hold_planes=hold, light=light, threshold=threshold,
-                                       initial_charge=initial, dark_charge=dark)
     ref_planes, ref_final = reference_loop(frames, hold, light, threshold, initial, dark)
-    np.testing.assert_array_equal(planes, ref_planes)
-    np.testing.assert_array_equal(final, ref_final)
+    for backend in ("numpy", "auto"):  # the plain loop, and the compiled kernel where numba imports
+        planes, final = integrate_and_fire(frames, hold_planes=hold, light=light, threshold=threshold,
+                                           initial_charge=initial, dark_charge=dark, backend=backend)
+        np.testing.assert_array_equal(planes, ref_planes)
+        np.testing.assert_array_equal(final, ref_final)
 
 
 @pytest.mark.parametrize("light, threshold", [(1.0, 1.0), (1.0, 0.7), (0.3, 1.0), (0.25, 0.5)])
@@ -163,7 +164,7 @@ def test_unit_light_and_threshold_shortcuts_match_the_reference_loop(light, thre
     dark = rng.random((5, 8), dtype=np.float32) * 0.1 if with_dark else None
     for hold in (1, 3):
         got = integrate_and_fire(frames, hold_planes=hold, light=light, threshold=threshold,
-                                 initial_charge=initial, dark_charge=dark)
+                                 initial_charge=initial, dark_charge=dark, backend="numpy")
         ref = reference_loop(frames, hold, light, threshold, initial, dark)
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
@@ -180,7 +181,7 @@ def test_band_size_never_changes_the_result(budget, monkeypatch):
     dark = rng.random((7, 8), dtype=np.float32) * 0.2
     for hold in (1, 2):
         got = integrate_and_fire(frames, hold_planes=hold, light=0.6, threshold=0.7,
-                                 initial_charge=initial, dark_charge=dark)
+                                 initial_charge=initial, dark_charge=dark, backend="numpy")
         ref = reference_loop(frames, hold, 0.6, 0.7, initial, dark)
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
