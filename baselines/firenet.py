@@ -345,6 +345,66 @@ class FireNet(LearnedMethod):
     def _grid_tensor(grid: np.ndarray) -> tuple[torch.Tensor]:
         return (torch.from_numpy(np.ascontiguousarray(grid))[None].contiguous(memory_format=torch.channels_last),)
 
+    # -- streaming (neuspike.video): carry the state from frame to frame -------------------------
+
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
+        """The image at the sample's key instant, continuing the state of the previous frame.
+
+        The state is committed only at the ends of full windows: the events after the last commit
+        (the previous fresh reconstruction ends on one, at its key instant) are cut into windows of
+        ``events_per_pixel * H * W`` events counted forward, each stepped and committed; the
+        remaining events up to the key instant are stepped on the committed state without committing
+        it, and give the output. A frame thus costs its full windows plus at most one step, whatever
+        the frame rate. The frame warms up afresh (as :meth:`reconstruct`) when time went back, when
+        more than ``max_windows`` windows are pending, or after :meth:`reset`. Events must reach back
+        to the previous frame (the video stream's event history does).
+        """
+        self._next_from = previous_s
+        try:
+            return self.reconstruct(sample)
+        finally:
+            self._next_from = None
+
+    def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
+        carried = getattr(self, "_carried", None)
+        if getattr(self, "_next_from", None) is not None and carried is not None and carried[0] is self._state:
+            image = self._continue(sample, *carried)
+            if image is not None:
+                return image, self.output_label
+        image, label = super()._reconstruct(sample)
+        self._carried = (self._state, sample.key_time_s, image)
+        return image, label
+
+    def _continue(self, sample: Sample, state: Any, t0: float, image: np.ndarray) -> np.ndarray | None:
+        key, ev, h, w = sample.key_time_s, sample.events, sample.height, sample.width
+        if key < t0:
+            return None
+        i0, i1 = (int(i) for i in np.searchsorted(ev.t_s, [t0, key], side="left"))
+        per = max(1, int(round(self.params["events_per_pixel"] * h * w)))
+        full = (i1 - i0) // per
+        if full > self.params["max_windows"]:
+            return None
+
+        def step(a: int, b: int, start: float, end: float) -> np.ndarray:
+            end = max(end, float(np.nextafter(start, np.inf)))
+            chunk = EventStream.trusted(ev.t_s[a:b], ev.x[a:b], ev.y[a:b], ev.p[a:b], w, h)
+            grid = voxel_grid(chunk, bins=NUM_BINS, t0_s=start, t1_s=end, height=h, width=w,
+                              normalize=self.params["normalize"])
+            return self.to_image(self.run_step(self._grid_tensor(grid)), sample)
+
+        for j in range(full):
+            a, b = i0 + j * per, i0 + (j + 1) * per
+            t1 = float(ev.t_s[b]) if b < i1 else key
+            image, t0 = step(a, b, t0, t1), t1
+        self._carried = (self._state, t0, image)
+        self.last_steps = full
+        if i0 + full * per < i1:  # the partial window: stepped, not committed
+            committed = self._state
+            image = step(i0 + full * per, i1, t0, key)
+            self._state = committed
+            self.last_steps = full + 1
+        return image
+
     def encode(self, sample: Sample) -> list[tuple[torch.Tensor]]:
         """One voxel grid per fixed-count event window up to the key instant (an empty grid without events)."""
         h, w = sample.height, sample.width
