@@ -277,3 +277,39 @@ def test_command_unwritable_output_and_failure_mid_run(recording, tmp_path, caps
         assert list(out.iterdir()) == []  # no video, frames or partial file left behind
     finally:
         registry.unregister("zz-video-fail")
+
+
+def test_firenet_carries_its_state_between_frames(tmp_path, one_torch_thread):
+    """The first frame is a fresh reconstruction; later frames step only the new windows (plus one
+    partial window) and stay close to fresh reconstructions (differing window tiling and longer warm-up)."""
+    from tests.shared_data import SHARED
+
+    weights = SHARED / "weights"
+    if not (weights / "firenet" / "firenet.pt").is_file():
+        pytest.skip("FireNet weights not available")
+    from neuspike.conditions import Condition
+    from neuspike.metrics import ssim
+    from neuspike.rng import derive_rng
+    from neuspike.scenes import SceneSpec, make_scene
+    from neuspike.simulate import write_sequence
+
+    scene = make_scene(SceneSpec(kind="pan", size=(64, 48), velocity_px_s=(400.0, 0.0)))
+    write_sequence(scene, Condition(light=0.25, motion=128), tmp_path, rng=derive_rng(0, "f"), start_s=0.0,
+                   duration_s=0.06, modalities=("events",))
+    m = registry.create("firenet", weights_dir=weights)
+    fresh = registry.create("firenet", weights_dir=weights)
+    per_window = round(0.35 * 64 * 48)
+    with open_recording(tmp_path) as rec:
+        times = frame_times(0.04, 0.06, 400)
+        previous = None
+        for k, (t, img) in enumerate(reconstruct_video(m, rec, times)):
+            if k:
+                new = rec.event_index(t) - rec.event_index(previous)
+                assert m.last_steps <= new // per_window + 2  # the windows pending since the last commit, + 1 partial
+            if k in (0, 2, 7):
+                ref = fresh.reconstruct(load_sample(events=tmp_path / "events.h5", at_s=t))
+                if k == 0:
+                    assert np.array_equal(img, ref) and m.last_steps == fresh.last_steps == 24
+                else:
+                    assert ssim(img, ref, data_range=1.0) > 0.9
+            previous = t
