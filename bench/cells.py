@@ -46,6 +46,7 @@ from bench.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
 from neuspike.cache import RecordingCache
 from neuspike.errors import InputError
+from neuspike.jsonio import canonical_json
 from neuspike.metrics import FULL_REFERENCE_METRICS, evaluate
 from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording
 
@@ -298,7 +299,8 @@ def run_cell(task: CellTask) -> CellResult:
             info[name]["inputs"] = "+".join(sorted(entry.inputs))
             slot = _method(name, task.setup)
             method = slot[1]
-            info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()))
+            info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()),
+                              method_params=canonical_json(method.describe()))
             resolved[name] = slot
         except registry.MethodUnavailable as exc:
             skipped[name] = one_line(exc)
@@ -336,6 +338,7 @@ def run_cell(task: CellTask) -> CellResult:
         meta = info[name]
         row = dict(common, method=name, inputs=meta.get("inputs", ""),
                    recurrent=meta.get("recurrent", False), parameters=meta.get("parameters", 0),
+                   method_params=meta.get("method_params", ""),
                    sim_seconds=sim_seconds, stage_seconds=stage_json)
         if recording is not None and meta.get("inputs"):
             used = set(meta["inputs"].split("+"))

@@ -32,6 +32,7 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
+from bench.results import tfp_windows
 from bench.tables import axis_label, axis_means, method_families, ok_rows, safe_name, swept_axes
 
 HOLDS = "holds"
@@ -124,19 +125,14 @@ def _axis_ready(frame: pd.DataFrame, axis: str) -> str | None:
 
 
 def _tfp_names(frame: pd.DataFrame) -> list[str]:
-    return sorted(m for m in pd.unique(frame["method"]) if m == "tfp" or str(m).startswith("tfp-"))
+    """The TFP methods of ``frame``, known by their implementation (not their names), sorted."""
+    return sorted(tfp_windows(frame))
 
 
-def _widest_tfp(names: Sequence[str]) -> str | None:
-    """``tfp`` (the whole window) if present, else the ``tfp-wN`` with the largest N."""
-    if "tfp" in names:
-        return "tfp"
-    widths = []
-    for n in names:
-        tail = n.split("-w", 1)[-1]
-        if tail.isdigit():
-            widths.append((int(tail), n))
-    return max(widths)[1] if widths else (names[0] if names else None)
+def _widest_tfp(frame: pd.DataFrame) -> str | None:
+    """The TFP method with the widest window (the whole window counts as widest), by its parameters."""
+    windows = tfp_windows(frame)
+    return max(sorted(windows), key=lambda m: windows[m]) if windows else None
 
 
 def _family_names(frame: pd.DataFrame, family: str) -> list[str]:
@@ -246,7 +242,7 @@ def tfi_noisy_high_light(frame: pd.DataFrame) -> Verdict:
     holds = bool(curve[brightest] < curve[peak])
     text = (f"tfi PSNR by L: {_curve_text('light', curve)}; peak at L = {axis_label('light', peak)}, "
             f"{curve[peak] - curve[brightest]:.2f} dB above the brightest L = {axis_label('light', brightest)}")
-    tfp = _widest_tfp(_tfp_names(frame))
+    tfp = _widest_tfp(frame)
     wide = axis_means(frame, "light")
     if tfp is not None and tfp in wide.index and brightest in wide.columns and not pd.isna(wide.loc[tfp, brightest]):
         text += f" (at that L {tfp}: {wide.loc[tfp, brightest]:.2f} dB)"
@@ -258,7 +254,7 @@ def tfi_snm_keep_motion(frame: pd.DataFrame) -> Verdict:
     reason = _axis_ready(frame, "motion")
     if reason:
         return UNCHECKED, reason
-    tfp = _widest_tfp(_tfp_names(frame))
+    tfp = _widest_tfp(frame)
     wide = axis_means(frame, "motion")
     present = [m for m in ("tfi", "snm") if m in wide.index]
     if tfp is None or tfp not in wide.index or not present:

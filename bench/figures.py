@@ -32,6 +32,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.table import Table  # noqa: E402
 
 from neuspike.atomic import write_with  # noqa: E402
+from bench.results import tfp_windows  # noqa: E402
 from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values,  # noqa: E402
                           method_families, method_order)
 
@@ -47,11 +48,16 @@ MARKERS = ("o", "s", "^", "v", "D", "P", "X", "*", "<", ">")
 STATUS_COLOURS = {"holds": "#1a7f37", "does not hold": "#c62828", "cannot check": "#6e6e6e"}
 
 
-def method_styles(methods: Sequence[str], families: Mapping[str, str]) -> dict[str, dict[str, Any]]:
-    """Colour, marker, line style and width of every method, stable for a given method list."""
+def method_styles(methods: Sequence[str], families: Mapping[str, str],
+                  tfp_windows: Mapping[str, float] | None = None) -> dict[str, dict[str, Any]]:
+    """Colour, marker, line style and width of every method, stable for a given method list.
+
+    ``tfp_windows`` (:func:`bench.results.tfp_windows`) gives the TFP variants a blue ramp by window.
+    """
     styles: dict[str, dict[str, Any]] = {}
     counters: dict[str, int] = {}
-    tfp = sorted((m for m in methods if families.get(m) == "spike" and _tfp_window(m) is not None), key=_tfp_window)
+    windows = dict(tfp_windows or {})
+    tfp = sorted((m for m in methods if m in windows), key=lambda m: windows[m])
     blues = plt.get_cmap("Blues")
     for m in methods:
         fam = families.get(m, "unknown")
@@ -68,15 +74,6 @@ def method_styles(methods: Sequence[str], families: Mapping[str, str]) -> dict[s
         styles[m] = {"color": color, "marker": marker, "linestyle": LINESTYLES[fam],
                      "linewidth": 2.4 if fam == "fusion" else 1.6}
     return styles
-
-
-def _tfp_window(name: str) -> float | None:
-    """Window of a TFP variant in planes (``tfp`` itself: the whole window, ``inf``); ``None`` otherwise."""
-    if name == "tfp":
-        return math.inf
-    if name.startswith("tfp-w") and name[5:].isdigit():
-        return float(name[5:])
-    return None
 
 
 def save_png(fig: Figure, path: str | Path, dpi: int = 130) -> Path:
@@ -124,7 +121,7 @@ def axis_figure(frame: pd.DataFrame, axis: str, metrics: Sequence[str] = ("psnr"
         raise ValueError(f"spread: expected 'std' or 'minmax', got {spread!r}")
     methods = method_order(frame)
     fams = method_families(frame)
-    styles = method_styles(methods, fams)
+    styles = method_styles(methods, fams, tfp_windows(frame))
     values = axis_values(frame, axis)
     fig, axes = plt.subplots(1, len(metrics), figsize=(6.2 * len(metrics) + 2.4, 5.0), squeeze=False)
     handles: dict[str, Any] = {}
@@ -211,7 +208,8 @@ def recon_grid_figure(images: Mapping[tuple[str, Any], np.ndarray], rows: Sequen
     return fig
 
 
-def accuracy_time_figure(points: pd.DataFrame, note: str = "") -> Figure:
+def accuracy_time_figure(points: pd.DataFrame, note: str = "",
+                         tfp_windows: Mapping[str, float] | None = None) -> Figure:
     """Mean PSNR and SSIM against ms per frame (log x), Pareto front marked.
 
     Parameters
@@ -220,7 +218,7 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "") -> Figure:
     note : one line under the title saying where the numbers come from
     """
     methods = list(points["method"])
-    styles = method_styles(methods, dict(zip(points["method"], points["family"])))
+    styles = method_styles(methods, dict(zip(points["method"], points["family"])), tfp_windows)
     fig, axes = plt.subplots(1, 2, figsize=(14.5, 5.6), squeeze=False)
     for ax, metric in zip(axes[0], ("psnr", "ssim")):
         pts = points[np.isfinite(points["ms_per_frame"].to_numpy(float)) & np.isfinite(points[metric].to_numpy(float))

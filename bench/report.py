@@ -54,6 +54,7 @@ import pandas as pd
 from bench import figures as figs
 from bench import tables as tb
 from neuspike.atomic import write_text, write_with
+from bench.results import tfp_windows
 from bench.claims import claims_markdown, evaluate_claims
 from neuspike.atomic import replacing
 from neuspike.errors import InputError
@@ -364,7 +365,7 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
             points = tb.accuracy_points(f)
         if points is not None and len(points):
             note = _accuracy_note(inputs)
-            fig = figs.accuracy_time_figure(points, note)
+            fig = figs.accuracy_time_figure(points, note, tfp_windows(f) if f is not None else None)
             written.append(figs.save_png(fig, fig_dir / "accuracy_vs_time.png"))
             figure_pages.append(fig)
             cols = ["method", "family", "ms_per_frame", "psnr", "ssim", "front_psnr", "front_ssim"]

@@ -11,6 +11,9 @@ Columns (:data:`COLUMNS`)
 ``method``          registry name; ``inputs`` its modalities joined by ``+``; ``recurrent`` bool;
                     ``parameters`` its learned parameter count
 ``normalisation``   the label the method reported (e.g. ``gain``, ``robust-p99``)
+``method_params``   the method's description as canonical JSON: its implementation, parameters (window,
+                    cutoff, ...), and for learned methods the weights file, its sha256 and the device
+                    (``Method.describe()``); reports read a method's parameters here, never from its name
 ``metric``          one of ``psnr``, ``ssim``, ``psnr_affine``, ``ssim_affine``; ``value`` its value
 ``status``          ``ok``; ``error`` (the method or the simulation raised: ``value`` is NaN and
                     ``error`` holds the exception's type and message); ``skipped`` (the method
@@ -34,6 +37,8 @@ order of :data:`SORT_COLUMNS`, so it does not depend on which cells finished fir
 from __future__ import annotations
 
 import io
+import json
+import math
 import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
@@ -46,12 +51,16 @@ from neuspike.atomic import write_text
 COLUMNS: tuple[str, ...] = (
     "cell", "scene", "kind", "image", "width", "height", "planes",
     "light", "motion", "noise", "effects", "seed",
-    "method", "inputs", "recurrent", "parameters", "normalisation",
+    "method", "inputs", "recurrent", "parameters", "normalisation", "method_params",
     "metric", "value", "status", "error",
     "ms_per_frame", "sim_seconds", "stage_seconds",
 )
 #: Columns that hold run-dependent measurements of time.
 TIMING_COLUMNS: tuple[str, ...] = ("ms_per_frame", "sim_seconds", "stage_seconds")
+#: Columns added after the first results were published; read as empty when absent.
+OPTIONAL_COLUMNS: tuple[str, ...] = ("method_params",)
+#: The ``implementation`` of TFP in a method's description.
+TFP_IMPLEMENTATION = "baselines.tfp.TFP"
 #: The order of rows in ``results.csv``.
 SORT_COLUMNS: tuple[str, ...] = ("scene", "noise", "light", "motion", "seed", "method", "metric")
 #: Row statuses.
@@ -61,7 +70,7 @@ _DTYPES: Mapping[str, Any] = {
     "cell": str, "scene": str, "kind": str, "image": str, "width": "int64", "height": "int64",
     "planes": "int64", "light": "float64", "motion": "int64", "noise": str, "effects": str,
     "seed": "int64", "method": str, "inputs": str, "recurrent": bool, "parameters": "int64",
-    "normalisation": str, "metric": str, "value": "float64", "status": str, "error": str,
+    "normalisation": str, "method_params": str, "metric": str, "value": "float64", "status": str, "error": str,
     "ms_per_frame": "float64", "sim_seconds": "float64", "stage_seconds": str,
 }
 _TEXT = [c for c, t in _DTYPES.items() if t is str]
@@ -99,10 +108,32 @@ def read_csv(path: str | os.PathLike) -> pd.DataFrame:
     """Read a part file or ``results.csv`` back with the documented dtypes."""
     frame = pd.read_csv(path, dtype={c: str for c in _TEXT}, keep_default_na=False,
                         na_values={c: [""] for c in _DTYPES if _DTYPES[c] is not str})
+    for column in OPTIONAL_COLUMNS:  # results written before the column existed
+        if column not in frame.columns:
+            frame[column] = ""
     missing = set(COLUMNS) - set(frame.columns)
     if missing:
         raise ValueError(f"{path}: missing result columns {sorted(missing)}")
     return _typed(frame[list(COLUMNS)].copy())
+
+
+def method_descriptions(frame: pd.DataFrame) -> dict[str, dict[str, Any]]:
+    """``{method: description}`` from the ``method_params`` column (empty for rows without one)."""
+    out: dict[str, dict[str, Any]] = {}
+    for method, text in zip(frame["method"], frame["method_params"]):
+        if method not in out or (not out[method] and text):
+            out[method] = json.loads(text) if text else {}
+    return out
+
+
+def tfp_windows(frame: pd.DataFrame) -> dict[str, float]:
+    """Planes per window of every TFP method of ``frame`` (``inf`` for the whole window), from its parameters."""
+    windows = {}
+    for method, info in method_descriptions(frame).items():
+        if info.get("implementation") == TFP_IMPLEMENTATION:
+            window = info.get("params", {}).get("window")
+            windows[method] = math.inf if window is None else float(window)
+    return windows
 
 
 def write_part(parts_dir: str | os.PathLike, cell_id: str, rows: Sequence[Mapping[str, Any]]) -> Path:

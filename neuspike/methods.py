@@ -123,8 +123,10 @@ class Method(abc.ABC):
         return self.reconstruct(sample)
 
     def describe(self) -> dict[str, Any]:
+        """What identifies this method's results: name, implementation, inputs, parameters, size."""
         return {
             "name": self.name,
+            "implementation": f"{type(self).__module__}.{type(self).__qualname__}",
             "inputs": sorted(self.inputs),
             "params": dict(self.params),
             "recurrent": self.recurrent,

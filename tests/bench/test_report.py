@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import shutil
 from pathlib import Path
@@ -14,6 +15,8 @@ from bench import claims as cl
 from bench import report
 from bench import tables as tb
 from bench.results import base_row, rows_frame, to_csv_text
+from neuspike import methods as registry
+from neuspike.jsonio import canonical_json
 
 LIGHTS = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)
 SCENES = ("pan:camera", "fan:coins")
@@ -31,13 +34,25 @@ def expected_psnr(method: str, light: float, scene: str, seed: int) -> float:
     return base + offset
 
 
+@functools.lru_cache(maxsize=None)
+def description(method: str) -> str:
+    """The ``method_params`` a sweep records: the registered method's own description (empty for made-up names)."""
+    if method not in registry.available():
+        return ""
+    try:
+        return canonical_json(registry.create(method).describe())
+    except registry.MethodUnavailable:
+        return ""
+
+
 def row(method, *, metric, value, light=0.25, motion=128, noise="none", scene="pan:camera", seed=0, status="ok",
         error="", ms=1.0, inputs=None):
     kind, image = scene.split(":")
     return base_row(cell=f"{scene}-{light}-{motion}-{noise}-{seed}", scene=scene, kind=kind, image=image, width=40,
                     height=24, planes=256, light=light, motion=motion, noise=noise, effects="", seed=seed,
                     method=method, inputs=inputs if inputs is not None else INPUTS.get(method, "spikes"),
-                    recurrent=False, parameters=0, normalisation="gain" if status == "ok" else "", metric=metric,
+                    recurrent=False, parameters=0, normalisation="gain" if status == "ok" else "",
+                    method_params=description(method), metric=metric,
                     value=value, status=status, error=error, ms_per_frame=ms if status == "ok" else np.nan,
                     sim_seconds=0.1, stage_seconds="{}")
 
