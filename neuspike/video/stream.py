@@ -491,23 +491,40 @@ def check_fps(fps: float, recording: VideoRecording, inputs: Iterable[str]) -> f
 
 # --------------------------------------------------------------------------- rolling buffers
 class _PlaneBuffer:
-    """Planes ``[b0, b1)`` of the spike file kept in memory; each plane is read once when windows advance."""
+    """Spike planes kept in memory, each read once while windows advance.
 
-    def __init__(self, recording: VideoRecording) -> None:
+    Planes ``[b0, b1)`` live at the start of a buffer that holds ``2 * window_planes`` planes (or
+    the window, if longer); a later window reads only its new planes, into the unused tail. When a
+    window no longer fits, a new buffer is started with the planes still needed (one window's
+    copy per window's worth of progress). A window handed out is a read-only view of planes that
+    are never written again, so the samples already yielded stay valid.
+    """
+
+    def __init__(self, recording: VideoRecording, window_planes: int) -> None:
         self.rec = recording
+        self.capacity = 2 * window_planes
+        self.buf: np.ndarray | None = None
         self.b0 = self.b1 = 0
-        self.planes = np.zeros((0, recording.height, recording.width), dtype=np.bool_)
 
     def get(self, w0: int, w1: int) -> np.ndarray:
-        if w0 >= self.b0 and w1 <= self.b1:
-            out = self.planes[w0 - self.b0:w1 - self.b0]
-        elif self.b0 <= w0 < self.b1:
-            new = self.rec.read_planes(self.b1, w1)
-            out = np.concatenate([self.planes[w0 - self.b0:], new])
+        buf = self.buf
+        if buf is not None and self.b0 <= w0 <= self.b1 and w1 <= self.b0 + buf.shape[0]:
+            if w1 > self.b1:
+                buf[self.b1 - self.b0:w1 - self.b0] = self.rec.read_planes(self.b1, w1)
+                self.b1 = w1
         else:
-            out = self.rec.read_planes(w0, w1)
-        self.planes, self.b0, self.b1 = out, w0, w1
-        return out
+            new = np.empty((max(self.capacity, w1 - w0), self.rec.height, self.rec.width), dtype=np.bool_)
+            filled = w0
+            if buf is not None and self.b0 <= w0 < self.b1:
+                filled = min(self.b1, w0 + new.shape[0])
+                new[:filled - w0] = buf[w0 - self.b0:filled - self.b0]
+            if w1 > filled:
+                new[filled - w0:w1 - w0] = self.rec.read_planes(filled, w1)
+                filled = w1
+            self.buf, self.b0, self.b1 = new, w0, filled
+        view = self.buf[w0 - self.b0:w1 - self.b0]
+        view.flags.writeable = False
+        return view
 
 
 class _EventBuffer:
@@ -606,7 +623,7 @@ def stream_samples(
     history = check_nonnegative("event_history_s", event_history_s)
     times = _check_times(times_s, recording)
     rate, total = recording.plane_rate_hz, recording.num_planes
-    planes = _PlaneBuffer(recording) if "spikes" in want else None
+    planes = _PlaneBuffer(recording, window_planes) if "spikes" in want else None
     events = _EventBuffer(recording) if "events" in want else None
     for k, t in enumerate(times):
         t = float(t)
@@ -619,7 +636,6 @@ def stream_samples(
             info.update(window_planes_in_file=[w0, w1], key_plane_in_file=key_plane, file_planes=total)
             if planes is not None:
                 block = planes.get(w0, w1)
-                block.flags.writeable = False
                 spikes = SpikeStream(block, plane_rate_hz=rate, start_s=w_start, gain=recording.gain,
                                      threshold=recording.threshold, meta={"source": str(recording.spikes_path)})
         else:
