@@ -58,6 +58,8 @@ __all__ = [
 
 #: Spike and event file names looked for in a simulated recording folder.
 FOLDER_SPIKES = ("spikes.dat", "spikes.npz")
+#: Events read from the file at a time (about 0.4 MB).
+EVENT_BLOCK = 1 << 15
 FOLDER_EVENTS = ("events.h5", "events.hdf5", "events.npz", "events.txt", "events.aedat4")
 
 
@@ -528,39 +530,57 @@ class _PlaneBuffer:
 
 
 class _EventBuffer:
-    """Events with ``t0 <= t < t1`` kept in memory; later windows read only the events after ``t1``."""
+    """The events of the current window and history, read ahead in blocks of the file.
+
+    Events are read in file order, :data:`EVENT_BLOCK` at a time, and appended to the unused tail of
+    the arrays; a window is the slice ``t0 <= t < t1`` of what was read (found by bisection in
+    memory). When an append does not fit, new arrays of twice the needed length are started with
+    the events still needed. Streams handed out are views of events that are never written again,
+    so the samples already yielded stay valid. A window that starts before the previous one, or
+    after everything read, starts afresh by bisection in the file.
+    """
+
+    _FIELDS = (("t_s", T_DTYPE), ("x", XY_DTYPE), ("y", XY_DTYPE), ("p", P_DTYPE))
 
     def __init__(self, recording: VideoRecording) -> None:
         self.rec = recording
-        self.t0 = self.t1 = -math.inf
-        self.i1 = 0
-        self.stream = EventStream.empty(recording.width, recording.height)
+        self.t0 = math.inf
+        self._restart(0)
+
+    def _restart(self, file_index: int) -> None:
+        self.arrays = {name: np.empty(0, dtype) for name, dtype in self._FIELDS}
+        self.e0 = self.ea = 0  # events read and kept: arrays[e0:ea]
+        self.ia = file_index  # file index of the first event not read
+
+    def _append(self, new: EventStream) -> None:
+        t = self.arrays["t_s"]
+        if self.ea > self.e0 and len(new) and new.t_s[0] < t[self.ea - 1]:
+            raise FormatError(f"{self.rec.events_path}: timestamps decrease at event {self.ia}")
+        n, kept = len(new), self.ea - self.e0
+        if self.ea + n > t.shape[0]:
+            fresh = {name: np.empty(2 * (kept + n), dtype) for name, dtype in self._FIELDS}
+            for name in fresh:
+                fresh[name][:kept] = self.arrays[name][self.e0:self.ea]
+            self.arrays, self.e0, self.ea = fresh, 0, kept
+        for name, _ in self._FIELDS:
+            self.arrays[name][self.ea:self.ea + n] = getattr(new, name)
+        self.ea += n
+        self.ia += n
 
     def get(self, t0: float, t1: float) -> EventStream:
-        if t0 >= self.t0 and t1 >= self.t1 and t0 <= self.t1 and self.t1 > -math.inf:
-            j1 = self.rec.event_index(t1)
-            new = self.rec.read_events(self.i1, j1) if j1 > self.i1 else None
-            kept = _tail(self.stream, t0)
-            if new is not None and len(new):
-                if len(kept) and new.t_s[0] < kept.t_s[-1]:
-                    raise FormatError(f"{self.rec.events_path}: timestamps decrease at event {self.i1}")
-                kept = EventStream.trusted(
-                    np.concatenate([kept.t_s, new.t_s]), np.concatenate([kept.x, new.x]),
-                    np.concatenate([kept.y, new.y]), np.concatenate([kept.p, new.p]),
-                    kept.width, kept.height,
-                )
-            self.stream, self.i1 = kept, j1
-        else:
-            i0, j1 = self.rec.event_index(t0), self.rec.event_index(t1)
-            self.stream, self.i1 = self.rec.read_events(i0, j1), j1
-        self.t0, self.t1 = t0, t1
-        return self.stream
-
-
-def _tail(stream: EventStream, t0: float) -> EventStream:
-    """The events with ``t >= t0`` (views; no revalidation of an already validated stream)."""
-    i = int(np.searchsorted(stream.t_s, t0, side="left"))
-    return EventStream.trusted(stream.t_s[i:], stream.x[i:], stream.y[i:], stream.p[i:], stream.width, stream.height)
+        count = self.rec.event_count
+        if t0 < self.t0:
+            self._restart(self.rec.event_index(t0))
+        self.e0 += int(np.searchsorted(self.arrays["t_s"][self.e0:self.ea], t0, side="left"))
+        if self.e0 == self.ea and self.ia < count and self.rec._events.time_of(self.ia) < t0:
+            self._restart(self.rec.event_index(t0))  # a jump forward: skip the events in between
+        while self.ia < count and (self.ea == self.e0 or self.arrays["t_s"][self.ea - 1] < t1):
+            self._append(self.rec.read_events(self.ia, min(count, self.ia + EVENT_BLOCK)))
+        e1 = self.e0 + int(np.searchsorted(self.arrays["t_s"][self.e0:self.ea], t1, side="left"))
+        self.t0 = t0
+        v = self.arrays
+        return EventStream.trusted(v["t_s"][self.e0:e1], v["x"][self.e0:e1], v["y"][self.e0:e1], v["p"][self.e0:e1],
+                                   self.rec.width, self.rec.height)
 
 
 # --------------------------------------------------------------------------- streaming

@@ -123,8 +123,9 @@ def test_memory_bounded_by_window_not_recording(tmp_path, rng):
 
 
 def test_event_memory_bounded_by_history(tmp_path, rng):
-    """1M events over 2 s (13 MB in memory) stream with 10 ms of history using a small fraction of that."""
-    write_events_h5(tmp_path / "ev.h5", _events(rng, 1_000_000, 0.0, 2.0))
+    """2M events over 2 s (26 MB in memory) stream with 10 ms of history in a small fraction of that
+    (what stays is the window, the history and one block read ahead, not the recording)."""
+    write_events_h5(tmp_path / "ev.h5", _events(rng, 2_000_000, 0.0, 2.0))
     m = registry.create("events-highpass")
     with open_recording(tmp_path / "ev.h5") as rec:
         times = frame_times(0.05, 1.95, 100)
@@ -135,7 +136,7 @@ def test_event_memory_bounded_by_history(tmp_path, rng):
         finally:
             tracemalloc.stop()
     assert n == 190
-    assert peak < 2e6, f"peak {peak / 1e6:.2f} MB"
+    assert peak < 4e6, f"peak {peak / 1e6:.2f} MB"
 
 
 def test_frame_times_and_fps_rules(recording):
