@@ -53,7 +53,14 @@ undeclared stage executes no code and draws no random numbers.
 Presets with v2e's numbers are in :data:`neuspike.conditions.EVENT_PRESETS`.
 
 Implementation
-    Per sample interval every pixel is updated with whole-array float32 operations into
+    Two backends give the same events, byte for byte (``backend=``). The compiled one
+    (:mod:`neuspike.sensors.event_kernels`, numba) runs the ideal pixel with ``threshold_mismatch``,
+    ``bandwidth`` and ``leak`` as one pass over the pixels per interval, then builds, orders (a
+    bucket sort of the same keys) and writes the interval's events in a second compiled pass; a
+    camera that declares ``shot_noise`` or ``refractory`` runs the NumPy path below, as does
+    ``backend="numpy"`` (the reference) and any machine where numba cannot be imported.
+
+    On the NumPy path, per sample interval every pixel is updated with whole-array float32 operations into
     preallocated buffers; only the pixels that cross a threshold go further. Each of their
     crossings becomes an int64 key ``(time fraction << b) | (pixel << 1) | ON`` whose numeric order
     is the output order, so one in-place sort per interval orders the events and the sorted keys
@@ -73,6 +80,7 @@ import numpy as np
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
+from neuspike.sensors.backends import resolve_backend
 from neuspike.streams import EventStream
 
 __all__ = [
@@ -99,6 +107,8 @@ _I01_SCALE = 275.0
 #: Order in which declared stages are listed in a recording's metadata.
 _STAGE_ORDER = ("threshold_mismatch", "bandwidth", "leak", "shot_noise", "refractory")
 _RANDOM_STAGES = ("threshold_mismatch", "leak", "shot_noise")
+#: Stages the compiled backend runs; a camera declaring any other runs the NumPy path.
+_COMPILED_STAGES = frozenset({"threshold_mismatch", "bandwidth", "leak"})
 
 _LIN_SLOPE = np.float32(np.log(DARK_FLOOR_8BIT) / DARK_FLOOR_8BIT)
 #: Finest resolution of a crossing time, as a power of two of the sample interval.
@@ -182,9 +192,13 @@ class EventCamera:
         batch per sample interval. Required when a random stage (``threshold_mismatch``, ``leak``,
         ``shot_noise``) is declared; never touched otherwise.
     threads : int, optional
-        ``2`` sorts and writes each interval's events in a worker thread while the pixels of the
-        next interval are updated (same output, byte for byte). It pays only when a second core
-        is idle; the default is ``1``.
+        NumPy path only: ``2`` sorts and writes each interval's events in a worker thread while
+        the pixels of the next interval are updated (same output, byte for byte). It pays only
+        when a second core is idle; the default is ``1``.
+    backend : {"auto", "numba", "numpy"}
+        ``"numba"`` runs the compiled kernels where the declared stages allow it (all but
+        ``shot_noise`` and ``refractory``), the NumPy path otherwise; ``"numpy"`` always runs the
+        NumPy path; ``"auto"`` is ``"numba"`` where numba can be imported. Same events either way.
 
     Notes
     -----
@@ -204,8 +218,10 @@ class EventCamera:
         effects: Iterable[Effect] = (),
         rng: np.random.Generator | None = None,
         threads: int | None = None,
+        backend: str = "auto",
     ) -> None:
         self.threads = check_positive_int("EventCamera threads", 1 if threads is None else threads)
+        self._backend = resolve_backend(backend)
         self.width = check_positive_int("EventCamera width", width)
         self.height = check_positive_int("EventCamera height", height)
         self.light = check_positive("EventCamera light", light)
@@ -296,6 +312,13 @@ class EventCamera:
     def last_time_s(self) -> float | None:
         """Time of the last sample received, or ``None`` before the first."""
         return self._t_last
+
+    @property
+    def backend(self) -> str:
+        """The implementation that :meth:`capture` runs: ``"numba"`` or ``"numpy"``."""
+        if self._backend == "numba" and set(self._effects) <= _COMPILED_STAGES:
+            return "numba"
+        return "numpy"
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -451,6 +474,9 @@ class _Capture:
         self.shot_noise = "shot_noise" in eff
         self.leak = cam._leak_per_s
         self.seconds = dict.fromkeys(["dvs_pixel", *(name for name in _STAGE_ORDER if name in eff)], 0.0)
+        self.compiled = cam.backend == "numba"
+        # stages that run inside the compiled pixel pass: their time is part of dvs_pixel's
+        self.fused = frozenset({"bandwidth", "leak"} & set(eff)) if self.compiled else frozenset()
         self.stage = "dvs_pixel"
         self.stage_t0 = time.perf_counter()
         self.luts = cam._luts()
@@ -499,10 +525,13 @@ class _Capture:
             k0 = 0
         self.last_emit = last_emit
         self.out = _EventBuffer(frames.shape[0] - k0)
-        if self.threads > 1 and frames.shape[0] - k0 > 1:
+        if self.threads > 1 and frames.shape[0] - k0 > 1 and not self.compiled:
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="neuspike-events")
         try:
-            self.loop(frames, times, k0, sig, mem, t_prev)
+            if self.compiled:
+                self.loop_compiled(frames, times, k0, sig, mem, t_prev)
+            else:
+                self.loop(frames, times, k0, sig, mem, t_prev)
             self.drain()
         finally:
             if self.pool is not None:
@@ -510,6 +539,62 @@ class _Capture:
                 self.pool = None
         cam._sig, cam._mem, cam._t_last = self.final_state
         cam._last_emit_s = last_emit
+
+    def loop_compiled(self, frames, times, k0, sig, mem, t_prev) -> None:
+        """:meth:`loop` for the compiled backend (no shot noise, no refractory period)."""
+        from neuspike.sensors import event_kernels
+
+        cam = self.cam
+        n = cam._n
+        spare = np.empty(n, np.float32)
+        log_max = np.empty(n, np.float32)
+        active = np.empty(n, np.int64)
+        keys = np.empty(0, np.int64)
+        log_floor = np.log(self.floor)
+        leak = self.leak
+        bandwidth = self.bandwidth_hz is not None
+        zero = np.float32(0.0)
+        for k in range(k0, frames.shape[0]):
+            t_k = float(times[k])
+            dt = t_k - t_prev
+            radiance = frames[k]
+            # the log stays in NumPy (its float32 log is not the C library's); the rest is compiled
+            np.maximum(radiance, self.floor, out=log_max)
+            np.log(log_max, out=log_max)
+            gain = offset = zero
+            clip = False
+            if bandwidth:
+                a = dt * 2.0 * np.pi * self.bandwidth_hz / _I01_SCALE
+                gain, offset = np.float32(self.scale8 * a), np.float32(_I01_OFFSET * a)
+                clip = (self.max_radiance * self.scale8 + _I01_OFFSET) * a > 1.0
+            dt32 = np.float32(dt)
+            n_active, n_events, c_max = event_kernels.pixel_update(
+                log_max, radiance, sig, mem, spare, self.d1, self.floor, self.slope, log_floor,
+                bandwidth, gain, offset, clip, leak, dt32, cam._symmetric, cam._th_on, cam._th_off, active,
+            )
+            if n_events:
+                if keys.shape[0] < n_events:
+                    keys = np.empty(2 * n_events, np.int64)
+                q_one = self.fraction_unit(t_prev, dt)
+                event_kernels.interval_keys(active, n_active, c_max, self.d1, sig, mem, leak, dt32,
+                                            cam._symmetric, cam._th_on, cam._th_off, q_one, cam._pix_bits, keys)
+                interval = keys[:n_events]
+                interval.sort()  # NumPy's vectorised sort: the order of the NumPy path, by construction
+                event_kernels.write_events(interval, cam._pix_bits, cam.width, t_prev, dt / q_one,
+                                           *self.out.extend(n_events))
+            sig, spare = spare, sig
+            t_prev = t_k
+        self.final_state = sig, mem, t_prev
+
+    def fraction_unit(self, t_a: float, dt: float) -> float:
+        """``2**q_bits``: crossing fractions are counted in units of ``2**-q_bits`` of the interval.
+
+        ``2**-44`` of the interval, or coarser where two float64 ulps of the timestamp are coarser
+        (then distinct fractions stay distinct times).
+        """
+        t_max = max(abs(t_a), abs(t_a + dt))
+        q_bits = min(self.cam._fraction_bits, int(math.floor(math.log2(dt / (2.0 * math.ulp(t_max))))))
+        return float(2 ** max(q_bits, 0))
 
     def loop(self, frames, times, k0, sig, mem, t_prev) -> None:
         cam = self.cam
@@ -649,11 +734,7 @@ class _Capture:
         """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel."""
         cam = self.cam
         d1, act = self.d1, self.act
-        # crossing fractions in units of 2**-q_bits of the interval: 2**-44, or coarser where two
-        # float64 ulps of the timestamp are coarser (then distinct fractions stay distinct times)
-        t_max = max(abs(t_a), abs(t_a + dt))
-        q_bits = min(cam._fraction_bits, int(math.floor(math.log2(dt / (2.0 * math.ulp(t_max))))))
-        q_one = float(2 ** max(q_bits, 0))
+        q_one = self.fraction_unit(t_a, dt)
         if cam._symmetric:
             np.abs(d1, out=self.tmp)
             np.greater_equal(self.tmp, cam._th_on[0], out=act)
@@ -880,9 +961,12 @@ class _Capture:
         for name, seconds in self.seconds.items():
             if name == "dvs_pixel":
                 params = {"light": cam.light, "threshold_on": cam.threshold_on,
-                          "threshold_off": cam.threshold_off}
+                          "threshold_off": cam.threshold_off, "backend": cam.backend}
             else:
                 params = dict(cam._effects[name].params)
-            stages.append({"name": name, "params": params, "seconds": seconds})
+            stage = {"name": name, "params": params, "seconds": seconds}
+            if name in self.fused:
+                stage["fused_into"] = "dvs_pixel"
+            stages.append(stage)
         meta = {"stages": stages, "event_count": int(t.shape[0])}
         return EventStream.trusted(t, x, y, p, cam.width, cam.height, meta)
