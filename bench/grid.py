@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any, Iterable, Sequence
 
+from neuspike import checks
 from neuspike.conditions import EVENT_PRESETS, NOISE_LEVELS, Condition, Effect, effect, merge_effects
 from neuspike.errors import InputError
 
@@ -53,7 +54,7 @@ PAPER_MOTIONS = (16, 32, 64, 128, 256)
 PAPER_FIXED_MOTION = 128
 #: The noise levels of Table 3.
 PAPER_NOISE_LEVELS = ("small", "medium", "high")
-#: The axes a preset sweeps.
+#: The axes a preset sweeps, in the order they are reported.
 AXES = ("light", "motion", "noise")
 
 #: Extra stages declared in every preset condition (see the module docstring).
@@ -302,10 +303,7 @@ def preset(
 
 def parse_size(text: str) -> tuple[int, int]:
     """``"160x100"`` -> ``(160, 100)`` (width, height)."""
-    parts = text.lower().replace(" ", "").split("x")
-    if len(parts) != 2 or not all(p.isdigit() for p in parts):
-        raise InputError(f"size: expected WxH such as 400x250, got {text!r}")
-    return _check_size((int(parts[0]), int(parts[1])))
+    return _check_size(checks.parse_size(text))
 
 
 def parse_fraction(text: str) -> float:

@@ -39,7 +39,6 @@ Reconstruction images (the convention a harness follows to get the figure grid)
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import math
 import os
@@ -53,7 +52,8 @@ import pandas as pd
 
 from bench import figures as figs
 from bench import tables as tb
-from neuspike.atomic import write_text, write_with
+from neuspike.atomic import write_text
+from neuspike.images import write_png
 from bench.results import tfp_windows
 from bench.claims import claims_markdown, evaluate_claims
 from neuspike.atomic import replacing
@@ -95,20 +95,7 @@ def write_image_png(path: str | os.PathLike, image01: np.ndarray) -> Path:
     InputError
         When the image is not 2-D, not finite, or outside [0, 1] (it is never clipped silently).
     """
-    from PIL import Image
-
-    img = np.asarray(image01, dtype=np.float64)
-    if img.ndim != 2:
-        raise InputError(f"write_image_png: expected a 2-D image, got shape {img.shape}")
-    if not np.isfinite(img).all() or (img.size and (img.min() < 0 or img.max() > 1)):
-        lo, hi = (float(np.nanmin(img)), float(np.nanmax(img))) if np.isfinite(img).any() else (math.nan, math.nan)
-        raise InputError(f"write_image_png: expected finite values in [0, 1], got values in [{lo}, {hi}]"
-                         + ("" if np.isfinite(img).all() else " and non-finite ones"))
-    u8 = np.round(img * 255.0).astype(np.uint8)
-    buf = io.BytesIO()
-    Image.fromarray(u8).save(buf, format="PNG")
-    data = buf.getvalue()
-    return write_with(path, lambda f: f.write(data))
+    return write_png(path, image01, clip=False)
 
 
 def _read_gray(path: Path) -> np.ndarray:

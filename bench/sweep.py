@@ -248,7 +248,7 @@ def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
     for name in spec.methods:
         entry = registry.entry(name)
         try:
-            method = registry.create(name)
+            method = registry.create(name, weights_dir=spec.weights, device=setup.device)
         except registry.MethodUnavailable as exc:
             unavailable[name] = one_line(exc)
             continue

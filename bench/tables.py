@@ -30,10 +30,9 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-#: The swept axes a results table can have, in the order they are reported.
-AXES: tuple[str, ...] = ("light", "motion", "noise")
-#: The metrics of ``results.csv``.
-METRICS: tuple[str, ...] = ("psnr", "ssim", "psnr_affine", "ssim_affine")
+from bench.cells import METRICS
+from bench.grid import AXES
+
 METRIC_LABELS: Mapping[str, str] = {
     "psnr": "PSNR (dB)", "ssim": "SSIM", "psnr_affine": "PSNR, affine-aligned (dB)",
     "ssim_affine": "SSIM, affine-aligned",

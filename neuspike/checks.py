@@ -93,3 +93,20 @@ def check_spike_window(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
     if not 0 <= key_plane < planes.shape[0]:
         raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
     return planes, int(key_plane)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"400x250"`` -> ``(400, 250)`` (width, height), both whole numbers >= 1.
+
+    Raises
+    ------
+    InputError
+        For anything else, naming what was expected.
+    """
+    parts = str(text).strip().lower().replace(" ", "").split("x")
+    if len(parts) != 2 or not all(p.isdigit() for p in parts):
+        raise InputError(f"size: expected WxH such as 400x250, got {text!r}")
+    w, h = int(parts[0]), int(parts[1])
+    if w < 1 or h < 1:
+        raise InputError(f"size: width and height must be at least 1, got {text!r}")
+    return w, h

@@ -26,6 +26,7 @@ import numpy as np
 
 from neuspike.atomic import write_bytes
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.images import encode_png
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: The data range every metric is computed with (methods return images in [0, 1]).
@@ -185,18 +186,13 @@ def write_outputs(out: Path, name: str, image: np.ndarray) -> tuple[Path, Path]:
     """
     import io
 
-    import cv2
-
     out.mkdir(parents=True, exist_ok=True)
-    img8 = np.round(np.asarray(image, dtype=np.float64) * 255.0).astype(np.uint8)
-    ok, buf = cv2.imencode(".png", img8)
-    if not ok:
-        raise NeuSpikeError(f"could not encode {name}.png")
+    png = encode_png(image, clip=False)
     npy = io.BytesIO()
     np.save(npy, np.asarray(image, dtype=np.float32))
     png_path, npy_path = out / f"{name}.png", out / f"{name}.npy"
     _write_atomic(npy_path, npy.getvalue())
-    _write_atomic(png_path, buf.tobytes())
+    _write_atomic(png_path, png)
     return png_path, npy_path
 
 

@@ -62,12 +62,12 @@ import numpy as np
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.sample import Sample
-from neuspike.streams import EventStream, SpikeStream
+from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 
 #: Spike planes per window when neither the caller nor a simulated recording says otherwise.
 DEFAULT_WINDOW_PLANES = 256
 #: Planes per second assumed for spike files that do not state it (the Vidar's).
-DEFAULT_PLANE_RATE_HZ = 20_000.0
+DEFAULT_PLANE_RATE_HZ = VIDAR_PLANE_RATE_HZ
 #: Seconds of event history before the window that a sample carries.
 EVENT_HISTORY_S = 1.0
 #: Suffixes of spike files :func:`load_sample` reads.

@@ -35,13 +35,14 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 import numpy as np
 
 from neuspike.atomic import write_bytes, write_text
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.checks import check_positive, check_positive_int, parse_size
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.images import write_png
 from neuspike.sample import Sample
 from neuspike.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.streams import EventStream, SpikeStream
+from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 
 if TYPE_CHECKING:
     from neuspike.cache import RecordingCache
@@ -73,7 +74,7 @@ class SensorConfig:
     """
 
     planes: int = 256
-    plane_rate_hz: float = 20_000.0
+    plane_rate_hz: float = VIDAR_PLANE_RATE_HZ
     upsampled_rate_hz: float = 22_500.0
     spike_threshold: float = 1.0
     event_threshold: float = 0.2
@@ -448,14 +449,8 @@ def _json_default(value: Any) -> Any:
 
 
 def write_png_atomic(path: Path, image01: np.ndarray) -> None:
-    """Write a [0, 1] float image as an 8-bit PNG, atomically (values outside are clipped)."""
-    import cv2
-
-    img8 = np.round(np.clip(image01, 0.0, 1.0) * 255.0).astype(np.uint8)
-    ok, buf = cv2.imencode(".png", img8)
-    if not ok:
-        raise NeuSpikeError(f"could not encode {path} as PNG")
-    write_bytes(path, buf.tobytes())
+    """Write a radiance image as an 8-bit PNG, atomically (HDR values above 1 saturate, by choice)."""
+    write_png(path, image01, clip=True)
 
 
 def write_npy_atomic(path: Path, array: np.ndarray) -> None:
@@ -571,12 +566,9 @@ def write_sequence(
 
 def _parse_size(text: str) -> tuple[int, int]:
     try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must look like 400x250, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size must be positive, got {text!r}")
-    return w, h
+        return parse_size(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parse_fraction(text: str) -> float:
@@ -625,7 +617,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="extra stages, e.g. 'threshold_mismatch:sigma=0.05,refractory:period_s=5e-4,shot_noise:rate_hz=5'")
     p.add_argument("--size", type=_parse_size, help="sensor size WxH (default: 400x250; a video's own size for --video)")
     p.add_argument("--planes", type=int, default=256, help="spike planes per window T (default: 256)")
-    p.add_argument("--plane-rate", type=float, default=20_000.0, help="spike planes per second (default: 20000)")
+    p.add_argument("--plane-rate", type=float, default=VIDAR_PLANE_RATE_HZ,
+                   help=f"spike planes per second (default: {VIDAR_PLANE_RATE_HZ:g})")
     p.add_argument("--threshold", type=float, default=1.0, help="spike threshold phi (default: 1)")
     p.add_argument("--event-threshold", type=float, default=0.2, help="DVS contrast threshold (default: 0.2)")
     p.add_argument("--modalities", default="spikes,events", help="what to simulate (default: spikes,events)")
