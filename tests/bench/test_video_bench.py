@@ -1,0 +1,63 @@
+"""The video benchmark on a tiny version of its standard recording."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench import video as vb
+from neuspike.methods import create
+from neuspike.metrics import psnr
+from neuspike.scenes import SceneSpec, make_scene
+from neuspike.video import frame_times, open_recording, reconstruct_video
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("video-bench")
+    cache, out = root / "recording", root / "out"
+    argv = ["--size", "48x32", "--duration", "0.005", "--fps", "2000", "--methods", "tfp,events-highpass,zz-none",
+            "--cache", str(cache), "--out", str(out), "--no-progress"]
+    assert vb.main(argv) == 0
+    return argv, cache, out
+
+
+def test_rows_columns_and_failing_method(bench_run):
+    _, _, out = bench_run
+    frame = pd.read_csv(out / "results.csv")
+    assert list(frame.columns) == list(vb.COLUMNS)
+    assert list(frame["method"]) == [vb.READ_ONLY, vb.SINGLE_FRAME, "tfp", "events-highpass", "zz-none"]
+    bad = frame.set_index("method").loc["zz-none"]
+    assert bad["status"] == "error" and "unknown method" in bad["error"]
+    ok = frame[frame["status"] == "ok"].set_index("method")
+    assert (ok.loc[["tfp", "events-highpass"], "frames"] == 10).all()
+    # real-time factor: sensor seconds per method second = frames/s divided by the output rate
+    assert np.allclose(ok["real_time_factor"], ok["frames_per_s"] / 2000.0)
+    assert np.allclose(ok["frames_per_s"], ok["frames"] / ok["method_s"])
+    for f in ("README.md", "metadata.json", "accuracy_vs_speed.png"):
+        assert (out / f).is_file()
+    assert "| tfp | spikes |" in (out / "README.md").read_text()
+    assert json.loads((out / "metadata.json").read_text())["spec"]["duration_s"] == 0.005
+
+
+def test_accuracy_matches_an_independent_scoring(bench_run):
+    """Mean PSNR of TFP equals PSNR against the scene rendered at each instant, computed here."""
+    _, cache, out = bench_run
+    scene = make_scene(SceneSpec(kind="fan", size=(48, 32), rpm=2600.0))
+    times = frame_times(0.0, 0.005, 2000)
+    with open_recording(cache) as rec:
+        scores = [psnr(img, np.clip(scene.render(np.array([t]))[0], 0, 1), data_range=1.0)
+                  for t, img in reconstruct_video(create("tfp"), rec, times)]
+    row = pd.read_csv(out / "results.csv").set_index("method").loc["tfp"]
+    assert row["mean_psnr_db"] == pytest.approx(np.mean(scores), abs=1e-4)
+
+
+def test_cached_recording_is_reused(bench_run):
+    argv, cache, out = bench_run
+    stamp = (cache / "meta.json").stat().st_mtime_ns
+    assert vb.main([a if a != "tfp,events-highpass,zz-none" else "tfp" for a in argv]) == 0
+    assert (cache / "meta.json").stat().st_mtime_ns == stamp
+    assert list(pd.read_csv(out / "results.csv")["method"]) == [vb.READ_ONLY, vb.SINGLE_FRAME, "tfp"]
