@@ -43,6 +43,7 @@ from typing import Any, Iterable, Sequence
 from neuspike import checks
 from neuspike.conditions import EVENT_PRESETS, NOISE_LEVELS, Condition, Effect, effect, merge_effects
 from neuspike.errors import InputError
+from neuspike.scenes import SceneSpec
 
 #: Scene kinds a grid may use (``video`` needs a file and is not part of the presets).
 SCENE_KINDS = ("pan", "zoom", "fan", "still")
@@ -78,7 +79,7 @@ class SceneEntry:
     """A named scene of a grid: ``name`` (``KIND:IMAGE``) and its :class:`~neuspike.scenes.SceneSpec`."""
 
     name: str
-    spec: Any  # neuspike.scenes.SceneSpec
+    spec: SceneSpec
 
     @property
     def kind(self) -> str:
@@ -104,7 +105,6 @@ def scene_entry(name: str, size: tuple[int, int]) -> SceneEntry:
     InputError
         Unknown kind, missing image, or a size that is not two whole numbers >= 1.
     """
-    from neuspike.scenes import SceneSpec
 
     if not isinstance(name, str) or ":" not in name:
         raise InputError(f"scene: expected KIND:IMAGE with KIND in {', '.join(SCENE_KINDS)}, got {name!r}")

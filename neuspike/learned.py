@@ -95,8 +95,9 @@ class LearnedMethod(Method):
     ----------
     name : str or None
         The registered name.
-    weights_file : str
-        File name of the weights (declared by the registry entry).
+    weights_file : str or None
+        File name of the weights (declared by the registry entry); ``None`` builds an untrained
+        module (:meth:`for_training`).
     weights_dir : path or None
         Folder the user named; ``None`` looks only at the weights shipped in the package.
     device : str or torch.device
@@ -120,20 +121,32 @@ class LearnedMethod(Method):
     #: Label of :meth:`to_image`'s read-out.
     output_label: ClassVar[str] = CLAMP
 
-    def __init__(self, name: str | None = None, *, weights_file: str,
+    def __init__(self, name: str | None = None, *, weights_file: str | None,
                  weights_dir: str | os.PathLike | None = None, device: str | torch.device = "cpu",
                  precision: str = "auto", **params: Any) -> None:
         dev = resolve_device(device)
         precision = resolve_precision(precision, dev)
-        path = resolve_weights(str(weights_file), weights_dir, subdirs=self.weights_subdirs)
-        super().__init__(name, weights_file=str(weights_file), precision=precision, **params)
+        path = None if weights_file is None else resolve_weights(str(weights_file), weights_dir,
+                                                                  subdirs=self.weights_subdirs)
+        super().__init__(name, weights_file=weights_file, precision=precision, **params)
         self.device = dev
-        self.weights_path: Path = path
-        self.weights_sha256 = file_sha256(path)
+        self.weights_path: Path | None = path
+        self.weights_sha256: str | None = None if path is None else file_sha256(path)
         module = self.build_module()
-        self.load_weights(module, path)
+        if path is not None:
+            self.load_weights(module, path)
         self.module: nn.Module = module.to(dev).eval()
         self._state: Any = None
+
+    @classmethod
+    def for_training(cls, name: str | None = None, *, device: str | torch.device = "cpu",
+                     **params: Any) -> "LearnedMethod":
+        """The method around a fresh, untrained module (no weights file): what a trainer encodes and trains.
+
+        ``params`` are the registry entry's own; precision is float32 (a trainer chooses its own
+        autocast). The module is left in eval mode: call ``method.module.train()`` to train it.
+        """
+        return cls(name, weights_file=None, device=device, precision="float32", **params)
 
     # -- what a subclass provides ----------------------------------------------------------------
 
@@ -165,8 +178,8 @@ class LearnedMethod(Method):
 
     def describe(self) -> dict[str, Any]:
         info = super().describe()
-        info.update(weights_file=self.weights_path.name, weights_sha256=self.weights_sha256,
-                    device=str(self.device))
+        info.update(weights_file=self.weights_path.name if self.weights_path is not None else None,
+                    weights_sha256=self.weights_sha256, device=str(self.device))
         return info
 
     @contextlib.contextmanager

@@ -18,7 +18,7 @@ from neuspike.checks import check_positive_int
 from neuspike.errors import InputError
 from neuspike.streams import EventStream
 
-__all__ = ["voxel_grid", "normalize_voxel_grid", "spike_bins", "spike_count"]
+__all__ = ["event_windows", "voxel_grid", "normalize_voxel_grid", "spike_bins", "spike_count"]
 
 
 def normalize_voxel_grid(grid: np.ndarray) -> np.ndarray:
@@ -201,3 +201,40 @@ def spike_count(planes: np.ndarray) -> np.ndarray:
     for s in range(0, n, _UINT8_PLANES):
         count += np.add.reduce(u8[s : s + _UINT8_PLANES], axis=0, dtype=np.uint8)
     return count
+
+
+def event_windows(t_s: np.ndarray, *, events_per_window: int, end_s: float,
+                  max_windows: int) -> list[tuple[int, int, float, float]]:
+    """Split sorted event times into fixed-count windows counted back from ``end_s``.
+
+    Parameters
+    ----------
+    t_s : ndarray float64 (N,)
+        Sorted event times, all ``< end_s``.
+    events_per_window : int
+        Events per window (the oldest window may hold fewer).
+    end_s : float
+        End of the last window, in seconds.
+    max_windows : int
+        Keep only the most recent windows.
+
+    Returns
+    -------
+    list of ``(i0, i1, t0_s, t1_s)``, oldest first: events ``i0:i1`` fall in ``[t0_s, t1_s]``, with
+    ``t0_s`` the first event's time and ``t1_s`` the next window's first event time (``end_s`` for
+    the last). An empty input gives an empty list. When all of a window's events and its end share
+    one timestamp, ``t1_s`` is the next representable float after ``t0_s``.
+    """
+    n = int(t_s.shape[0])
+    if n == 0:
+        return []
+    ends = list(range(n, 0, -events_per_window))[:max_windows]
+    windows = []
+    next_start = float(end_s)
+    for i1 in ends:
+        i0 = max(0, i1 - events_per_window)
+        t0 = float(t_s[i0])
+        t1 = next_start if next_start > t0 else float(np.nextafter(t0, np.inf))
+        windows.append((i0, i1, t0, t1))
+        next_start = t0
+    return windows[::-1]

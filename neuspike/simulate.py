@@ -38,10 +38,14 @@ from neuspike.atomic import write_bytes, write_text
 from neuspike.checks import check_positive, check_positive_int, parse_size
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.formats.events_io import EventsH5Writer, write_events_h5
+from neuspike.formats.vidar_dat import DatWriter, write_dat
 from neuspike.images import write_png
-from neuspike.sample import Sample
 from neuspike.rng import derive_rng
+from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
+from neuspike.sensors.event_camera import EventCamera
+from neuspike.sensors.spike_camera import SpikeCamera
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 
 if TYPE_CHECKING:
@@ -137,8 +141,6 @@ def scene_effects(scene: Any, condition: Condition) -> tuple[Effect, ...]:
 
 def _cameras(scene: Any, condition: Condition, sensor: SensorConfig, modalities: frozenset[str],
              rng: np.random.Generator):
-    from neuspike.sensors.event_camera import EventCamera
-    from neuspike.sensors.spike_camera import SpikeCamera
 
     effects = scene_effects(scene, condition)
     spike_rng, event_rng = rng.spawn(2)
@@ -466,8 +468,6 @@ def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[st
     Each file is written atomically; ``meta.json`` is written last, so a folder with a
     ``meta.json`` is complete.
     """
-    from neuspike.formats.events_io import write_events_h5
-    from neuspike.formats.vidar_dat import write_dat
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -510,8 +510,6 @@ def write_sequence(
     Ground-truth frames are the scene at its real frame instants inside the span (videos: the
     source frames; other scenes: every 256 planes), with their sensor and scene times.
     """
-    from neuspike.formats.events_io import EventsH5Writer
-    from neuspike.formats.vidar_dat import DatWriter
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

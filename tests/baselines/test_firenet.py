@@ -20,7 +20,6 @@ from baselines.firenet import (
     NUM_BINS,
     FireNet,
     FireNetModule,
-    event_windows,
     load_firenet,
     map_state_dict,
 )
@@ -29,6 +28,7 @@ from neuspike.errors import FormatError, InputError
 from neuspike.methods import MethodUnavailable
 from neuspike.weights import PACKAGE_WEIGHTS, WEIGHTS_ENV, WeightsNotFound, resolve_weights
 from neuspike.metrics import ssim
+from neuspike.representations import event_windows
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.simulate import simulate_window
