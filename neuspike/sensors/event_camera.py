@@ -192,9 +192,9 @@ class EventCamera:
         batch per sample interval. Required when a random stage (``threshold_mismatch``, ``leak``,
         ``shot_noise``) is declared; never touched otherwise.
     threads : int, optional
-        NumPy path only: ``2`` sorts and writes each interval's events in a worker thread while
-        the pixels of the next interval are updated (same output, byte for byte). It pays only
-        when a second core is idle; the default is ``1``.
+        ``2`` sorts and writes each interval's events in a worker thread while the pixels of the
+        next interval are updated (same output, byte for byte). It pays only when a second core
+        is idle; the default is ``1``.
     backend : {"auto", "numba", "numpy"}
         ``"numba"`` runs the compiled kernels where the declared stages allow it (all but
         ``shot_noise`` and ``refractory``), the NumPy path otherwise; ``"numpy"`` always runs the
@@ -316,9 +316,7 @@ class EventCamera:
     @property
     def backend(self) -> str:
         """The implementation that :meth:`capture` runs: ``"numba"`` or ``"numpy"``."""
-        if self._backend == "numba" and set(self._effects) <= _COMPILED_STAGES:
-            return "numba"
-        return "numpy"
+        return self._backend
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -474,9 +472,12 @@ class _Capture:
         self.shot_noise = "shot_noise" in eff
         self.leak = cam._leak_per_s
         self.seconds = dict.fromkeys(["dvs_pixel", *(name for name in _STAGE_ORDER if name in eff)], 0.0)
-        self.compiled = cam.backend == "numba"
+        # "numba": the compiled pixel pass always; the compiled event building too unless shot
+        # noise or a refractory period is declared (those events are built by the NumPy code)
+        self.pixel_kernel = cam.backend == "numba"
+        self.compiled = self.pixel_kernel and set(eff) <= _COMPILED_STAGES
         # stages that run inside the compiled pixel pass: their time is part of dvs_pixel's
-        self.fused = frozenset({"bandwidth", "leak"} & set(eff)) if self.compiled else frozenset()
+        self.fused = frozenset({"bandwidth", "leak"} & set(eff)) if self.pixel_kernel else frozenset()
         self.stage = "dvs_pixel"
         self.stage_t0 = time.perf_counter()
         self.luts = cam._luts()
@@ -486,11 +487,15 @@ class _Capture:
         self.d1 = np.empty(n, np.float32)
         self.act = np.empty(n, np.bool_)
         self.act2 = np.empty(n, np.bool_)
+        if cam.backend == "numba":
+            self.log_max = np.empty(n, np.float32)
+            self.active = np.empty(n, np.int64)
         # internal log: v2e's lin-log of 255 * light * radiance minus the constant ln(255 * light)
         # (only differences of the log matter), so the radiance needs no scaling per frame
         self.scale8 = cam.light * REFERENCE_WHITE_8BIT
         self.floor = np.float32(DARK_FLOOR_8BIT / self.scale8)
         self.slope = np.float32(np.log(DARK_FLOOR_8BIT) / (DARK_FLOOR_8BIT / self.scale8))
+        self.log_floor = np.log(self.floor)
 
     def switch(self, stage: str) -> str:
         """Charge the time since the last switch to the current stage; return that stage."""
@@ -525,7 +530,7 @@ class _Capture:
             k0 = 0
         self.last_emit = last_emit
         self.out = _EventBuffer(frames.shape[0] - k0)
-        if self.threads > 1 and frames.shape[0] - k0 > 1 and not self.compiled:
+        if self.threads > 1 and frames.shape[0] - k0 > 1:
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="neuspike-events")
         try:
             if self.compiled:
@@ -545,46 +550,71 @@ class _Capture:
         from neuspike.sensors import event_kernels
 
         cam = self.cam
-        n = cam._n
-        spare = np.empty(n, np.float32)
-        log_max = np.empty(n, np.float32)
-        active = np.empty(n, np.int64)
-        keys = np.empty(0, np.int64)
-        log_floor = np.log(self.floor)
-        leak = self.leak
-        bandwidth = self.bandwidth_hz is not None
-        zero = np.float32(0.0)
+        spare = np.empty(cam._n, np.float32)
+        # key buffers used in turn: with a worker thread, one is sorted while the next is filled
+        buffers = [np.empty(0, np.int64), np.empty(0, np.int64)]
+        jobs = 0
         for k in range(k0, frames.shape[0]):
             t_k = float(times[k])
             dt = t_k - t_prev
-            radiance = frames[k]
-            # the log stays in NumPy (its float32 log is not the C library's); the rest is compiled
-            np.maximum(radiance, self.floor, out=log_max)
-            np.log(log_max, out=log_max)
-            gain = offset = zero
-            clip = False
-            if bandwidth:
-                a = dt * 2.0 * np.pi * self.bandwidth_hz / _I01_SCALE
-                gain, offset = np.float32(self.scale8 * a), np.float32(_I01_OFFSET * a)
-                clip = (self.max_radiance * self.scale8 + _I01_OFFSET) * a > 1.0
-            dt32 = np.float32(dt)
-            n_active, n_events, c_max = event_kernels.pixel_update(
-                log_max, radiance, sig, mem, spare, self.d1, self.floor, self.slope, log_floor,
-                bandwidth, gain, offset, clip, leak, dt32, cam._symmetric, cam._th_on, cam._th_off, active,
-            )
+            n_active, n_events, c_max = self.pixel_pass(frames[k], dt, sig, mem, spare)
             if n_events:
-                if keys.shape[0] < n_events:
-                    keys = np.empty(2 * n_events, np.int64)
+                slot = jobs & 1
+                while len(self.pending) > 1:  # the job two back read this slot's buffer
+                    self.pending.pop(0).result()
+                if buffers[slot].shape[0] < n_events:
+                    buffers[slot] = np.empty(2 * n_events, np.int64)
+                keys = buffers[slot][:n_events]
                 q_one = self.fraction_unit(t_prev, dt)
-                event_kernels.interval_keys(active, n_active, c_max, self.d1, sig, mem, leak, dt32,
-                                            cam._symmetric, cam._th_on, cam._th_off, q_one, cam._pix_bits, keys)
-                interval = keys[:n_events]
-                interval.sort()  # NumPy's vectorised sort: the order of the NumPy path, by construction
-                event_kernels.write_events(interval, cam._pix_bits, cam.width, t_prev, dt / q_one,
-                                           *self.out.extend(n_events))
+                event_kernels.interval_keys(self.active, n_active, c_max, self.d1, sig, mem, self.leak,
+                                            np.float32(dt), cam._symmetric, cam._th_on, cam._th_off, q_one,
+                                            cam._pix_bits, keys)
+                if self.out.would_grow(n_events):
+                    self.drain()  # no write may be pending into arrays about to be replaced
+                outputs = self.out.extend(n_events)
+                if self.pool is None:
+                    self.finish_interval(keys, t_prev, dt / q_one, outputs)
+                else:
+                    # fresh output memory costs a page fault per 4 KiB on first touch: fault the
+                    # times in here, so that the two threads carry about the same load
+                    outputs[0].fill(0.0)
+                    self.pending.append(self.pool.submit(self.finish_interval, keys, t_prev, dt / q_one, outputs))
+                jobs += 1
             sig, spare = spare, sig
             t_prev = t_k
         self.final_state = sig, mem, t_prev
+
+    def finish_interval(self, keys: np.ndarray, t_a: float, scale: float, outputs: list[np.ndarray]) -> None:
+        """Order one interval's keys (NumPy's vectorised sort) and decode them into the output."""
+        from neuspike.sensors import event_kernels
+
+        keys.sort()  # the keys are distinct integers up to duplicates: the NumPy path's order exactly
+        event_kernels.write_events(keys, self.cam._pix_bits, self.cam.width, t_a, scale, *outputs)
+
+    def pixel_pass(self, radiance, dt, sig, mem, sig_new):
+        """Compiled pixel update of one interval (lin-log, bandwidth, leak, ``d1``, crossing pixels).
+
+        Fills ``sig_new``, ``self.d1`` and ``self.active``, leaks ``mem``; returns
+        ``(number of crossing pixels, their events, largest crossing count)``.
+        """
+        from neuspike.sensors import event_kernels
+
+        cam = self.cam
+        # the log stays in NumPy (its float32 log is not the C library's); the rest is compiled
+        log_max = np.maximum(radiance, self.floor, out=self.log_max)
+        np.log(log_max, out=log_max)
+        gain = offset = np.float32(0.0)
+        clip = False
+        bandwidth = self.bandwidth_hz is not None
+        if bandwidth:
+            a = dt * 2.0 * np.pi * self.bandwidth_hz / _I01_SCALE
+            gain, offset = np.float32(self.scale8 * a), np.float32(_I01_OFFSET * a)
+            clip = (self.max_radiance * self.scale8 + _I01_OFFSET) * a > 1.0
+        return event_kernels.pixel_update(
+            log_max, radiance, sig, mem, sig_new, self.d1, self.floor, self.slope, self.log_floor,
+            bandwidth, gain, offset, clip, self.leak, np.float32(dt), cam._symmetric, cam._th_on, cam._th_off,
+            self.active,
+        )
 
     def fraction_unit(self, t_a: float, dt: float) -> float:
         """``2**q_bits``: crossing fractions are counted in units of ``2**-q_bits`` of the interval.
@@ -604,7 +634,12 @@ class _Capture:
             t_k = float(times[k])
             dt = t_k - t_prev
             radiance = frames[k]
-            if self.bandwidth_hz is not None:
+            nz = None
+            if self.pixel_kernel:  # the compiled pixel pass, then shot noise and refractory here
+                n_active, _, _ = self.pixel_pass(radiance, dt, sig, mem, spare)
+                sig_new = spare
+                nz = self.active[:n_active]
+            elif self.bandwidth_hz is not None:
                 log_k = self.log_into(radiance, d1)
                 self.switch("bandwidth")
                 # eps = min(1, (I8 + 20) / 275 * dt * 2 pi f); sig_new = sig + eps * (log - sig)
@@ -619,12 +654,13 @@ class _Capture:
                 self.switch("dvs_pixel")
             else:
                 sig_new = self.log_into(radiance, spare)
-            if self.leak is not None:
-                self.switch("leak")
-                np.multiply(self.leak, np.float32(dt), out=tmp)
-                mem -= tmp
-                self.switch("dvs_pixel")
-            np.subtract(sig_new, mem, out=d1)
+            if nz is None:
+                if self.leak is not None:
+                    self.switch("leak")
+                    np.multiply(self.leak, np.float32(dt), out=tmp)
+                    mem -= tmp
+                    self.switch("dvs_pixel")
+                np.subtract(sig_new, mem, out=d1)
             noise = None
             if self.shot_noise:
                 self.switch("shot_noise")
@@ -632,7 +668,7 @@ class _Capture:
                 if noise is not None:
                     noise = self.noise_pixels(noise, sig, mem, dt)
                 self.switch("dvs_pixel")
-            self.interval(sig, mem, t_prev, dt, noise)
+            self.interval(sig, mem, t_prev, dt, noise, nz)
             sig, spare = sig_new, sig
             t_prev = t_k
         self.final_state = sig, mem, t_prev
@@ -730,21 +766,29 @@ class _Capture:
         return pixels, (ev_pix[order], ev_f[order], ev_on[order])
 
     # ------------------------------------------------------------------ events
-    def interval(self, sig: np.ndarray, mem: np.ndarray, t_a: float, dt: float, noise) -> None:
-        """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel."""
+    def interval(self, sig: np.ndarray, mem: np.ndarray, t_a: float, dt: float, noise,
+                 nz: np.ndarray | None = None) -> None:
+        """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel.
+
+        ``nz``: the crossing pixels (ascending) when the compiled pixel pass found them already.
+        """
         cam = self.cam
         d1, act = self.d1, self.act
         q_one = self.fraction_unit(t_a, dt)
-        if cam._symmetric:
-            np.abs(d1, out=self.tmp)
-            np.greater_equal(self.tmp, cam._th_on[0], out=act)
+        if nz is not None:
+            if noise is not None:  # these pixels' events come from noise_pixels
+                nz = nz[~np.isin(nz, noise[0], assume_unique=True)]
         else:
-            np.greater_equal(d1, cam._th_on, out=act)
-            np.less_equal(d1, cam._neg_th_off, out=self.act2)
-            np.logical_or(act, self.act2, out=act)
-        if noise is not None:
-            act[noise[0]] = False  # these pixels' events come from noise_pixels
-        nz = np.flatnonzero(act)
+            if cam._symmetric:
+                np.abs(d1, out=self.tmp)
+                np.greater_equal(self.tmp, cam._th_on[0], out=act)
+            else:
+                np.greater_equal(d1, cam._th_on, out=act)
+                np.less_equal(d1, cam._neg_th_off, out=self.act2)
+                np.logical_or(act, self.act2, out=act)
+            if noise is not None:
+                act[noise[0]] = False  # these pixels' events come from noise_pixels
+            nz = np.flatnonzero(act)
         parts = []
         if nz.size:
             parts.append(self.crossing_keys(nz, sig, mem, t_a, dt, q_one))

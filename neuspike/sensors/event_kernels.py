@@ -69,11 +69,8 @@ def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_flo
     active : (n,) int64 output: the pixels with ``|d1|`` at or past a threshold, ascending.
     """
     n = radiance.shape[0]
-    n_active = 0
-    events = 0
-    c_max = np.float32(0)
     one = np.float32(1)
-    th = th_on[0]
+    # first a branch-free pass the compiler vectorises: the new log, the leak, d1
     for i in range(n):
         x = radiance[i]
         lin = (x if x < floor else floor) * slope
@@ -82,8 +79,8 @@ def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_flo
         if bandwidth:
             eps = x * bw_gain
             eps = eps + bw_offset
-            if bw_clip and eps > one:
-                eps = one
+            if bw_clip:
+                eps = one if eps > one else eps
             s_new = sig[i] + (log_k - sig[i]) * eps
         else:
             s_new = log_k
@@ -92,22 +89,28 @@ def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_flo
         if leak is not None:
             m = m - leak[i] * leak_dt
             mem[i] = m
-        d = s_new - m
-        d1[i] = d
+        d1[i] = s_new - m
+    # then the crossing pixels, their events and the largest count
+    n_active = 0
+    events = 0
+    c_max = np.float32(0)
+    th = th_on[0]
+    for i in range(n):
+        d = d1[i]
         if symmetric:
-            hit = abs(d) >= th
+            if not abs(d) >= th:
+                continue
             th_i = th
         else:
-            on = d > 0
-            hit = d >= th_on[i] or d <= -th_off[i]
-            th_i = th_on[i] if on else th_off[i]
-        if hit:
-            active[n_active] = i
-            n_active += 1
-            c = abs(np.trunc(d / th_i))
-            events += np.int64(c)
-            if c > c_max:
-                c_max = c
+            if not (d >= th_on[i] or d <= -th_off[i]):
+                continue
+            th_i = th_on[i] if d > 0 else th_off[i]
+        active[n_active] = i
+        n_active += 1
+        c = abs(np.trunc(d / th_i))
+        events += np.int64(c)
+        if c > c_max:
+            c_max = c
     return n_active, events, np.int64(c_max)
 
 
