@@ -1,14 +1,18 @@
-"""Throughput of the spike and event camera simulators on a reproducible standard input.
+"""Throughput of the spike and event camera simulators, each beside its reference in the same run.
 
 Standard input: scikit-image's ``camera`` photograph panning 2 px per frame, 256 frames at
-22,500 frames/s, 400x250 (the scene is rendered once, outside the timed region). The spike camera
-holds each frame for one plane (256 planes); the event camera sees the 256 frames at their times.
+22,500 frames/s, 400x250 (rendered once, outside the timed region). The spike camera holds each
+frame for one plane (256 planes); the event camera sees the 256 frames at their times.
 
-Prints planes/s for the spike camera and frames/s plus events/s for the event camera, each with no
-effects, with the presets and with every effect, beside the reference figures measured on this
-machine class (a plain NumPy integrate-and-fire loop; Spike-Zoo's simulator; v2e's DVS emulator).
+Spike camera: planes/s of the compiled kernel (numba) on 1 and 2 threads, writing bool planes
+and bit-packed planes, and of the suite's NumPy path, beside a plain NumPy integrate-and-fire loop
+(the reference). Event camera: frames/s of the compiled backend (one thread, and with the worker
+thread) beside the NumPy path (the reference), without effects, with the v2e presets and with
+every effect. Every configuration is timed in turn within each repeat, so a change in the
+machine's load touches reference and candidate alike; the median is reported with its spread and
+the 1-minute load average. Each target ends in a one-line verdict (met / missed, with the ratio).
 
-    python -m bench.simulator_speed [--repeats 7] [--size 400x250] [--threads N]
+    python -m bench.simulator_speed [--repeats 7] [--size 400x250] [--quick]
 """
 
 from __future__ import annotations
@@ -18,12 +22,14 @@ import os
 import platform
 import statistics
 import time
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
-import torch
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.scenes import SceneSpec, make_scene
+from neuspike.sensors.backends import NUMBA_AVAILABLE
 from neuspike.sensors.event_camera import EventCamera
 from neuspike.sensors.spike_camera import SpikeCamera
 
@@ -31,66 +37,161 @@ FRAME_RATE_HZ = 22_500.0
 PX_PER_FRAME = 2.0
 FRAMES = 256
 
-REFERENCE = {
-    "plain NumPy integrate-and-fire loop": "24,900 planes/s",
-    "Spike-Zoo simulator": "1,211 planes/s",
-    "v2e DVS, clean preset": "156 frames/s (6.9 M events/s)",
-    "v2e DVS, noisy preset": "270 frames/s",
-}
-
-SPIKE_CONFIGS = {
-    "no effects": (),
-    "all effects (initial_charge, dark_current sigma 50)": (effect("initial_charge"), effect("dark_current")),
-}
+EVERY_EVENT_EFFECT = (
+    effect("threshold_mismatch", sigma=0.05), effect("bandwidth", cutoff_hz=30.0),
+    effect("refractory", period_s=5e-4), effect("leak", rate_hz=0.1), effect("shot_noise", rate_hz=5.0),
+)
 EVENT_CONFIGS = {
     "no effects": (),
     "clean preset (v2e)": EVENT_PRESETS["clean"],
     "noisy preset (v2e)": EVENT_PRESETS["noisy"],
-    "all effects": (
-        effect("threshold_mismatch", sigma=0.05), effect("bandwidth", cutoff_hz=30.0),
-        effect("refractory", period_s=5e-4), effect("leak", rate_hz=0.1), effect("shot_noise", rate_hz=5.0),
-    ),
+    "every effect": EVERY_EVENT_EFFECT,
 }
+#: Targets: (sensor, configuration, candidate implementation, reference implementation, ratio).
+TARGETS = (
+    ("spike", "no effects", "numba, 2 threads", "plain NumPy loop", 3.0),
+    ("spike", "no effects", "numba, 1 thread", "plain NumPy loop", 2.0),
+    ("event", "no effects", "numba, best", "NumPy path (today's)", 2.0),
+    ("event", "every effect", "numba, best", "NumPy path (today's)", 2.0),
+)
 
 
-def standard_input(width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """The panning ``camera`` frames (256, H, W) and their times (256,)."""
-    times = np.arange(FRAMES, dtype=np.float64) / FRAME_RATE_HZ
+def standard_input(width: int, height: int, frames: int = FRAMES) -> tuple[np.ndarray, np.ndarray]:
+    """The panning ``camera`` frames (frames, H, W) float32 and their times (frames,) in seconds."""
+    times = np.arange(frames, dtype=np.float64) / FRAME_RATE_HZ
     scene = make_scene(SceneSpec(kind="pan", image="camera", size=(width, height),
                                  velocity_px_s=(PX_PER_FRAME * FRAME_RATE_HZ, 0.0)))
     return np.ascontiguousarray(scene.render(times), dtype=np.float32), times
 
 
-def _median_time(fn, repeats: int) -> tuple[float, float, float, object]:
-    fn()  # warm-up
-    times, result = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), min(times), max(times), result
+def plain_integrate_and_fire(frames: np.ndarray, light: float = 1.0, threshold: float = 1.0) -> np.ndarray:
+    """The reference: Algorithm 1 as a plain NumPy loop over planes (one plane per frame)."""
+    light32, phi = np.float32(light), np.float32(threshold)
+    charge = np.zeros(frames.shape[1:], np.float32)
+    drive = np.empty_like(charge)
+    planes = np.empty(frames.shape, np.bool_)
+    for k in range(frames.shape[0]):
+        np.multiply(frames[k], light32, out=drive)
+        charge += drive
+        np.greater_equal(charge, phi, out=planes[k])
+        charge -= planes[k] * phi
+    return planes
 
 
-def run(width: int = 400, height: int = 250, repeats: int = 7) -> list[dict]:
-    frames, times = standard_input(width, height)
-    rows = []
-    for label, effects in SPIKE_CONFIGS.items():
-        def once(effects=effects):
-            cam = SpikeCamera(width, height, light=1.0, threshold=1.0, effects=effects, rng=np.random.default_rng(0))
-            return cam.capture(frames, hold_planes=1)
-        med, lo, hi, stream = _median_time(once, repeats)
-        rows.append({"sensor": "spike", "config": label, "seconds": med, "min": lo, "max": hi,
-                     "rate": FRAMES / med, "unit": "planes/s", "count": int(np.count_nonzero(stream.planes))})
+@dataclass
+class Case:
+    sensor: str
+    config: str
+    impl: str
+    threads: int
+    run: Callable[[], Any]
+    count: Callable[[Any], int]
+    setup: Callable[[], None] = lambda: None
+
+
+def _numba_threads(n: int) -> None:
+    if NUMBA_AVAILABLE:
+        import numba
+
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def _get_numba_threads() -> int:
+    if NUMBA_AVAILABLE:
+        import numba
+
+        return numba.get_num_threads()
+    return 1
+
+
+def cases(frames: np.ndarray, times: np.ndarray) -> list[Case]:
+    """Every timed configuration, references first."""
+    _, h, w = frames.shape
+    out: list[Case] = [Case("spike", "no effects", "plain NumPy loop", 1, lambda: plain_integrate_and_fire(frames),
+                            lambda p: int(np.count_nonzero(p)))]
+
+    def spike(backend: str, packed: bool):
+        def once():
+            cam = SpikeCamera(w, h, light=1.0, threshold=1.0, rng=None, backend=backend)
+            if packed:
+                return cam.capture_packed(frames, hold_planes=1)[0].count()
+            return int(np.count_nonzero(cam.capture(frames, hold_planes=1).planes))
+        return once
+
+    out.append(Case("spike", "no effects", "NumPy path", 1, spike("numpy", False), int))
+    if NUMBA_AVAILABLE:
+        for threads in (1, 2):
+            s = "s" if threads > 1 else ""
+            out.append(Case("spike", "no effects", f"numba, {threads} thread{s}", threads, spike("numba", False), int,
+                            setup=lambda t=threads: _numba_threads(t)))
+            out.append(Case("spike", "no effects", f"numba packed, {threads} thread{s}", threads,
+                            spike("numba", True), int, setup=lambda t=threads: _numba_threads(t)))
+
+    def event(effects, backend: str, threads: int):
+        def once():
+            cam = EventCamera(w, h, light=1.0, effects=effects, rng=np.random.default_rng(0), backend=backend,
+                              threads=threads)
+            return len(cam.capture(frames, times))
+        return once
+
     for label, effects in EVENT_CONFIGS.items():
-        def once(effects=effects):
-            cam = EventCamera(width, height, light=1.0, effects=effects, rng=np.random.default_rng(0))
-            return cam.capture(frames, times)
-        med, lo, hi, stream = _median_time(once, repeats)
-        # the first frame only initialises the pixels; 255 intervals produce events
-        rows.append({"sensor": "event", "config": label, "seconds": med, "min": lo, "max": hi,
-                     "rate": FRAMES / med, "unit": "frames/s", "count": len(stream),
-                     "events_per_s": len(stream) / med})
+        out.append(Case("event", label, "NumPy path (today's)", 1, event(effects, "numpy", 1), int))
+        if NUMBA_AVAILABLE:
+            out.append(Case("event", label, "numba, 1 thread", 1, event(effects, "numba", 1), int,
+                            setup=lambda: _numba_threads(1)))
+            out.append(Case("event", label, "numba + worker thread", 2, event(effects, "numba", 2), int,
+                            setup=lambda: _numba_threads(1)))
+    return out
+
+
+def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRAMES) -> list[dict]:
+    """Time every case ``repeats`` times, round-robin; one row per case with the median rate."""
+    images, times = standard_input(width, height, frames)
+    all_cases = cases(images, times)
+    previous = _get_numba_threads()
+    results: dict[int, dict[str, Any]] = {}
+    for i, case in enumerate(all_cases):  # warm-up: compilation, caches, first-touch allocations
+        case.setup()
+        results[i] = {"count": case.count(case.run()), "seconds": [], "load": []}
+    for _ in range(repeats):
+        for i, case in enumerate(all_cases):
+            case.setup()
+            t0 = time.perf_counter()
+            case.run()
+            results[i]["seconds"].append(time.perf_counter() - t0)
+            results[i]["load"].append(os.getloadavg()[0])
+    _numba_threads(previous)
+    rows = []
+    for i, case in enumerate(all_cases):
+        sec = results[i]["seconds"]
+        med = statistics.median(sec)
+        rows.append({"sensor": case.sensor, "config": case.config, "impl": case.impl, "threads": case.threads,
+                     "seconds": med, "min": min(sec), "max": max(sec), "rate": frames / med,
+                     "unit": "planes/s" if case.sensor == "spike" else "frames/s",
+                     "count": results[i]["count"], "load_1min": statistics.median(results[i]["load"]),
+                     "width": width, "height": height, "frames": frames})
     return rows
+
+
+def verdicts(rows: list[dict]) -> list[str]:
+    """One line per target: met or missed, with the measured ratio."""
+    lines = []
+    for sensor, config, impl, ref, target in TARGETS:
+        pick = [r for r in rows if r["sensor"] == sensor and r["config"] == config]
+        refs = [r for r in pick if r["impl"] == ref]
+        if impl == "numba, best":
+            cands = [r for r in pick if r["impl"].startswith("numba")]
+            cands = [max(cands, key=lambda r: r["rate"])] if cands else []
+        else:
+            cands = [r for r in pick if r["impl"] == impl]
+        if not refs or not cands:
+            lines.append(f"{sensor} camera, {config}, {impl} >= {target:g}x {ref}: not measured (numba not importable)")
+            continue
+        ratio = cands[0]["rate"] / refs[0]["rate"]
+        verdict = "met" if ratio >= target else "missed"
+        lines.append(f"{sensor} camera, {config}: {cands[0]['impl']} >= {target:g}x {ref}: {verdict} "
+                     f"({ratio:.2f}x: {cands[0]['rate']:,.0f} vs {refs[0]['rate']:,.0f} {cands[0]['unit']})")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,29 +199,37 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=int, default=7, help="timed runs per configuration (median reported)")
     p.add_argument("--size", default="400x250", help="sensor size WxH (default 400x250)")
-    p.add_argument("--threads", type=int, help="torch threads (default: torch's choice)")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke test in seconds: 80x48, 16 frames, 1 repeat (figures not meaningful)")
     args = p.parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
     w, h = (int(v) for v in args.size.lower().split("x"))
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"torch threads {torch.get_num_threads()}, numpy {np.__version__}")
-    print(f"input: camera panning {PX_PER_FRAME:g} px/frame, {FRAMES} frames at {FRAME_RATE_HZ:,.0f} frames/s, "
-          f"{w}x{h}; median of {args.repeats} runs after one warm-up\n")
-    rows = run(w, h, args.repeats)
-    print(f"{'sensor':<7} {'configuration':<52} {'rate':>16} {'median s':>9} {'spread s':>15} {'output':>22}")
+    frames, repeats = FRAMES, args.repeats
+    if args.quick:
+        w, h, frames, repeats = 80, 48, 16, 1
+    numba_version = "not importable"
+    if NUMBA_AVAILABLE:
+        import numba
+
+        numba_version = f"{numba.__version__}, up to {numba.config.NUMBA_NUM_THREADS} threads"
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, load average {load}; "
+          f"numpy {np.__version__}, numba {numba_version}")
+    print(f"input: camera panning {PX_PER_FRAME:g} px/frame, {frames} frames at {FRAME_RATE_HZ:,.0f} frames/s, "
+          f"{w}x{h}; median of {repeats} runs after one warm-up, configurations timed in turn\n")
+    rows = run(w, h, repeats, frames)
+    print(f"{'sensor':<6} {'configuration':<20} {'implementation':<26} {'thr':>3} {'rate':>18} {'x ref':>6} "
+          f"{'median s':>9} {'spread s':>15} {'load':>5} {'output':>20}")
     for r in rows:
-        extra = f"{r['count']:,} {'spikes' if r['sensor'] == 'spike' else 'events'}"
+        ref = next(x for x in rows if x["sensor"] == r["sensor"] and x["config"] == r["config"])
         rate = f"{r['rate']:,.0f} {r['unit']}"
-        print(f"{r['sensor']:<7} {r['config']:<52} {rate:>16} {r['seconds']:>9.4f} "
-              f"{r['min']:>7.4f}-{r['max']:<7.4f} {extra:>22}")
-        if "events_per_s" in r:
-            print(f"{'':<7} {'':<52} {r['events_per_s'] / 1e6:>12.1f} M events/s")
-    print("\nreference figures on this machine class:")
-    for k, v in REFERENCE.items():
-        print(f"  {k}: {v}")
-    print("targets: spike camera >= 20,000 planes/s; event camera >= 5x v2e (>= 780 frames/s clean, "
-          ">= 1,350 frames/s with every effect)")
+        what = "spikes" if r["sensor"] == "spike" else "events"
+        print(f"{r['sensor']:<6} {r['config']:<20} {r['impl']:<26} {r['threads']:>3} {rate:>18} "
+              f"{r['rate'] / ref['rate']:>5.2f}x {r['seconds']:>9.4f} {r['min']:>7.4f}-{r['max']:<7.4f} "
+              f"{r['load_1min']:>5.2f} {r['count']:>13,} {what}")
+    print("\n(x ref: against the first row of the same sensor and configuration, measured in this run)")
+    print("verdicts:")
+    for line in verdicts(rows):
+        print(f"  {line}")
     return 0
 
 
