@@ -149,6 +149,31 @@ class DatWriter:
             raise
         self._planes += t
 
+    def write_packed(self, data: np.ndarray, *, height: int, width: int) -> None:
+        """Append planes already packed in this format's layout, written as they are.
+
+        ``data`` is uint8 (T, H * W / 8), e.g. ``SpikeCamera.capture_packed(...)[0].data``: each
+        plane flipped vertically, pixel ``p`` bit ``p % 8`` of byte ``p // 8``. Same size rules as
+        :meth:`write`, with which it can be mixed.
+        """
+        self._check_open()
+        nbytes = plane_bytes(height, width)
+        d = np.asarray(data)
+        if d.dtype != np.uint8 or d.ndim != 2 or d.shape[1] != nbytes:
+            raise InputError(f"packed planes: expected uint8 of shape (T, {nbytes}) for {width}x{height} "
+                             f"(W x H), got {d.dtype} {d.shape}")
+        if self._shape is None:
+            self._shape = (int(height), int(width))
+        elif self._shape != (int(height), int(width)):
+            raise InputError(f"DatWriter: expected planes of {self._shape[1]}x{self._shape[0]} (W x H) like the "
+                             f"earlier ones, got {width}x{height}")
+        try:
+            self._file.write(np.ascontiguousarray(d).data)
+        except BaseException:
+            self.abort()
+            raise
+        self._planes += d.shape[0]
+
     def close(self) -> Path:
         """Finish the file and move it into place; returns its path."""
         self._check_open()
