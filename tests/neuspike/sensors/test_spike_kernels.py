@@ -8,7 +8,7 @@ from hypothesis import given, settings
 
 from neuspike.conditions import effect
 from neuspike.errors import InputError
-from neuspike.formats.vidar_dat import read_dat, write_dat
+from neuspike.formats.vidar_dat import DatWriter, read_dat, write_dat
 from neuspike.sensors import spike_camera
 from neuspike.sensors.backends import NUMBA_AVAILABLE, resolve_backend
 from neuspike.sensors.spike_camera import PackedPlanes, SpikeCamera, integrate_and_fire, pack_planes
@@ -89,6 +89,28 @@ def test_packed_planes_are_the_dat_bytes_and_unpack_back(backend, tmp_path):
     assert path.read_bytes() == packed.data.tobytes()
     np.testing.assert_array_equal(read_dat(path, height=10, width=12), planes)
     np.testing.assert_array_equal(pack_planes(planes).data, packed.data)
+
+
+def test_dat_writer_takes_packed_planes_as_they_are(tmp_path):
+    rng = np.random.default_rng(6)
+    cam = SpikeCamera(16, 6, light=0.5, threshold=1.0, rng=None)
+    frames = rng.random((7, 6, 16), dtype=np.float32)
+    packed, _ = cam.capture_packed(frames[:4], hold_planes=2)
+    later = cam.capture(frames[4:], hold_planes=2).planes
+    with DatWriter(tmp_path / "mixed.dat") as w:
+        w.write_packed(packed.data, height=6, width=16)
+        w.write(later)  # packed and bool planes mix in one file
+        assert w.planes_written == 14
+    expected = np.concatenate([packed.unpack(), later])
+    assert (tmp_path / "mixed.dat").read_bytes() == write_dat(tmp_path / "ref.dat", expected).read_bytes()
+    with DatWriter(tmp_path / "bad.dat") as w:
+        with pytest.raises(InputError, match="packed planes"):
+            w.write_packed(packed.data, height=4, width=16)  # wrong plane size
+        with pytest.raises(InputError, match="packed planes"):
+            w.write_packed(packed.data.astype(np.int16), height=6, width=16)
+        w.write_packed(packed.data, height=6, width=16)
+        with pytest.raises(InputError, match="like the earlier ones"):
+            w.write_packed(np.zeros((1, 12), np.uint8), height=8, width=12)
 
 
 @pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=needs_numba)])
