@@ -165,6 +165,8 @@ class Execution:
         ``False`` simulates every cell afresh and stores nothing.
     plugins : tuple of str
         Plug-in modules each worker imports (see :func:`bench.cells.load_plugins`).
+    device : str
+        Torch device of learned methods (default ``"cpu"``).
     allow_failures, force, retry_failed, progress, report :
         See the command line's help. ``progress=None`` shows the bar only on a terminal.
     """
@@ -181,6 +183,7 @@ class Execution:
     retry_failed: bool = False
     progress: bool | None = None
     report: bool = True
+    device: str = "cpu"
 
 
 @dataclass
@@ -381,7 +384,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         threads = 1 if remote else max(1, usable // max(1, executor.workers))
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
-    setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads)
+    setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
 
     resolved = resolve_methods(spec, setup)
     sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved}
@@ -577,6 +580,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask); "
                    "without it a local Dask cluster of --workers processes is started")
     r.add_argument("--threads", type=int, help="torch threads per worker (default: usable CPUs / workers)")
+    r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu; e.g. cuda)")
     r.add_argument("--cache", help="folder of cached simulated recordings (default: <out>/cache); "
                    "'none' disables the cache")
     r.add_argument("--allow-failures", action="store_true",
@@ -637,7 +641,7 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
 def execution_from_args(args: argparse.Namespace) -> Execution:
     cache = args.cache
     return Execution(
-        executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads,
+        executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads, device=args.device,
         cache_dir=None if cache in (None, "none") else cache, use_cache=(cache != "none"),
         plugins=tuple(args.plugin), allow_failures=args.allow_failures, force=args.force,
         retry_failed=args.retry_failed, progress=False if args.no_progress else None,
