@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +24,8 @@ import numpy as np
 from neuspike.atomic import publish
 from neuspike.checks import check_positive
 from neuspike.errors import FormatError, InputError, SourceError
+from neuspike.formats._npz import NpzArchive
+from neuspike.jsonio import json_default
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = ["read_spike_npz", "write_spike_npz"]
@@ -33,13 +34,56 @@ __all__ = ["read_spike_npz", "write_spike_npz"]
 _PLANE_KEYS = ("planes", "spk")
 
 
+#: Longest ``meta_json`` read (characters) and deepest nesting accepted.
+_MAX_META_CHARS = 1 << 24
+_MAX_META_DEPTH = 64
+
+
 def _scalar(archive: Any, key: str, path: Path) -> float | None:
     if key not in archive.files:
         return None
     a = np.asarray(archive[key])
     if a.shape != () or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
         raise FormatError(f"{path}: expected {key!r} to be a single number, got shape {a.shape} dtype {a.dtype}")
-    return float(a)
+    v = float(a)
+    if not np.isfinite(v):
+        raise FormatError(f"{path}: expected {key!r} to be a finite number, got {v!r}")
+    return v
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of parsed JSON, without recursion."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        v, d = stack.pop()
+        deepest = max(deepest, d)
+        if isinstance(v, dict):
+            stack.extend((x, d + 1) for x in v.values())
+        elif isinstance(v, list):
+            stack.extend((x, d + 1) for x in v)
+    return deepest
+
+
+def _meta_from(a: np.ndarray, path: Path) -> dict[str, Any]:
+    """The ``meta_json`` array (a 0-d string) as a JSON object of bounded size and depth."""
+    if a.shape != () or a.dtype.kind not in "US":
+        raise FormatError(f"{path}: expected 'meta_json' to be one string, got shape {a.shape} dtype {a.dtype}")
+    text = a.item()
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", errors="replace")
+    if len(text) > _MAX_META_CHARS:
+        raise FormatError(f"{path}: 'meta_json' is {len(text)} characters long (at most {_MAX_META_CHARS})")
+    try:
+        meta = json.loads(text)
+    except RecursionError:
+        raise FormatError(f"{path}: 'meta_json' nests deeper than {_MAX_META_DEPTH} levels") from None
+    except ValueError as err:
+        raise FormatError(f"{path}: 'meta_json' is not a JSON object ({err})") from None
+    if not isinstance(meta, dict):
+        raise FormatError(f"{path}: 'meta_json' is not a JSON object, got {type(meta).__name__}")
+    if _depth(meta) > _MAX_META_DEPTH:
+        raise FormatError(f"{path}: 'meta_json' nests deeper than {_MAX_META_DEPTH} levels")
+    return meta
 
 
 def _planes_from(a: np.ndarray, path: Path, key: str) -> np.ndarray:
@@ -87,22 +131,18 @@ def read_spike_npz(
     Raises
     ------
     SourceError
-        If the file is missing or not a readable ``.npz`` archive.
+        If the file is missing.
     FormatError
-        If the key is absent, the planes are not (T, H, W) or hold values other than 0 and 1.
+        If the file is not a readable ``.npz`` archive (a damaged member, a header declaring more
+        data than the member holds, a plain ``.npy`` file), the key is absent, the planes are not
+        (T, H, W) or hold values other than 0 and 1, or a stored number is out of range.
     InputError
         If ``plane_rate_hz`` contradicts the rate stored in the archive.
     """
     p = Path(path)
     if not p.is_file():
         raise SourceError(f"no such spike file: {p}")
-    try:
-        archive = np.load(p, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile) as err:
-        raise SourceError(f"{p}: not a readable .npz archive ({err})") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise SourceError(f"{p}: expected an .npz archive, found a single .npy array")
-    with archive:
+    with NpzArchive(p) as archive:
         names = list(archive.files)
         if key is None:
             found = [k for k in _PLANE_KEYS if k in names]
@@ -119,10 +159,7 @@ def read_spike_npz(
         threshold = _scalar(archive, "threshold", p)
         meta: dict[str, Any] = {}
         if "meta_json" in names:
-            try:
-                meta = dict(json.loads(str(archive["meta_json"])))
-            except (ValueError, TypeError) as err:
-                raise FormatError(f"{p}: 'meta_json' is not a JSON object ({err})") from None
+            meta = _meta_from(archive["meta_json"], p)
     if plane_rate_hz is None:
         rate = stored_rate if stored_rate is not None else VIDAR_PLANE_RATE_HZ
     else:
@@ -132,17 +169,11 @@ def read_spike_npz(
     meta.update({"source": str(p), "format": "npz", "key": key,
                  "plane_rate_hz_from": "file" if stored_rate is not None else
                  ("argument" if plane_rate_hz is not None else "default (Vidar)")})
-    return SpikeStream(planes, plane_rate_hz=rate, start_s=start_s or 0.0, gain=gain, threshold=threshold, meta=meta)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"cannot store {type(value).__name__} in meta_json")
+    try:
+        return SpikeStream(planes, plane_rate_hz=rate, start_s=start_s or 0.0, gain=gain, threshold=threshold,
+                           meta=meta)
+    except InputError as err:  # a stored rate, start, gain or threshold out of range
+        raise FormatError(f"{p}: {err}") from None
 
 
 def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
@@ -161,7 +192,7 @@ def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
     if not isinstance(stream, SpikeStream):
         raise InputError(f"stream: expected a SpikeStream, got {type(stream).__name__}")
     try:
-        meta_json = json.dumps(stream.meta, default=_json_default)
+        meta_json = json.dumps(stream.meta, default=json_default)
     except (TypeError, ValueError) as err:
         raise InputError(f"stream.meta: cannot be stored as JSON ({err})") from None
     arrays: dict[str, np.ndarray] = {

@@ -24,7 +24,7 @@ import numpy as np
 
 from neuspike.atomic import publish
 from neuspike.checks import check_positive, check_positive_int
-from neuspike.errors import FormatError, InputError
+from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = ["DatWriter", "count_planes", "plane_bytes", "read_dat", "read_spike_stream", "write_dat"]
@@ -250,10 +250,9 @@ def _geometry(height: int, width: int, raw_width: int | None) -> tuple[int, int,
 
 
 def _file_planes(path: Path, h: int, rw: int, nbytes: int) -> int:
-    try:
-        size = path.stat().st_size
-    except FileNotFoundError:
-        raise FileNotFoundError(f"no such .dat file: {path}") from None
+    if not path.is_file():
+        raise SourceError(f"no such .dat file: {path}")
+    size = path.stat().st_size
     planes, remainder = divmod(size, nbytes)
     if remainder:
         raise FormatError(
@@ -313,9 +312,14 @@ def read_dat(
     p = Path(path)
     h, w, rw, nbytes = _geometry(height, width, raw_width)
     total = _file_planes(p, h, rw, nbytes)
+    for name, value in (("start", start), ("stop", stop)):
+        if value is None and name == "stop":
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise InputError(f"{name}: expected a whole plane index, got {value!r}")
     first = int(start)
     last = total if stop is None else int(stop)
-    if first != start or (stop is not None and last != stop) or not 0 <= first <= last <= total:
+    if not 0 <= first <= last <= total:
         raise InputError(
             f"plane range [{start}, {stop}) is outside the file's {total} planes (0 <= start <= stop <= {total})"
         )

@@ -68,7 +68,7 @@ def test_missing_key_wrong_shape_and_missing_file(tmp_path):
     with pytest.raises(SourceError):
         read_spike_npz(tmp_path / "absent.npz")
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    with pytest.raises(SourceError):
+    with pytest.raises(FormatError, match="junk.npz: not a readable .npz archive"):
         read_spike_npz(tmp_path / "junk.npz")
 
 
