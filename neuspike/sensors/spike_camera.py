@@ -264,15 +264,16 @@ def integrate_and_fire(
     return planes, charge
 
 
-#: Pixels per band of the compiled kernel: a band's charge, input rows and output stay in the L1/L2
-#: caches through a plane, and a Vidar sensor (250 rows) still splits into enough bands for threads.
-_KERNEL_BAND_PIXELS = 8192
+#: Most pixels per band of the compiled kernel: a band's charge (4 bytes a pixel) stays in the L2
+#: cache while the frames stream through it, contiguously, from memory.
+_KERNEL_BAND_PIXELS = 1 << 16
 
 
-def _band_rows(h: int, w: int, multiple: int) -> int:
-    rows = max(1, _KERNEL_BAND_PIXELS // w)
-    rows = -(-rows // multiple) * multiple
-    return min(rows, -(-h // multiple) * multiple)
+def _band_rows(h: int, w: int, multiple: int, threads: int) -> int:
+    """Rows per band (a multiple of ``multiple``): at least one band per thread, bands of equal size."""
+    n_bands = max(threads, -(-(h * w) // _KERNEL_BAND_PIXELS))
+    rows = -(-h // n_bands)
+    return -(-rows // multiple) * multiple
 
 
 def _first_bad_frame(frames: np.ndarray) -> None:
@@ -287,18 +288,21 @@ def _first_bad_frame(frames: np.ndarray) -> None:
 def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, threshold: np.float32,
                         charge: np.ndarray, dark: np.ndarray | None, packed: bool) -> np.ndarray | PackedPlanes:
     """The fused kernel, in place on ``charge``; validates the radiance from its counts."""
+    import numba
+
     from neuspike.sensors import spike_kernels
 
     k_frames, h, w = frames.shape
+    threads = numba.get_num_threads()
     if frames.dtype not in (np.float32, np.float64):
         frames = frames.astype(np.float32)  # float16 and the like: numba has no kernel for them
     frames = np.ascontiguousarray(frames)
     if packed:
-        rows = _band_rows(h, w, 8)
+        rows = _band_rows(h, w, 8, threads)
         out = np.empty((k_frames * hold, h * w // 8), np.uint8)
         kernel = spike_kernels.fire_packed
     else:
-        rows = _band_rows(h, w, 1)
+        rows = _band_rows(h, w, 1, threads)
         out = np.empty((k_frames * hold, h, w), np.bool_)
         kernel = spike_kernels.fire_planes
     negatives = np.zeros(-(-h // rows), np.int64)
