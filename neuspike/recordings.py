@@ -88,9 +88,9 @@ def read_meta(folder: str | os.PathLike) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        meta = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{path}: not a readable JSON file ({exc})") from None
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise FormatError(f"{path}: not a readable JSON file ({type(exc).__name__}: {exc})") from None
     if not isinstance(meta, dict):
         raise FormatError(f"{path}: expected a JSON object, got {type(meta).__name__}")
     return meta
@@ -171,6 +171,14 @@ def _meta_float(meta: dict[str, Any] | None, key: str) -> float | None:
     return v
 
 
+def _meta_int(meta: dict[str, Any], key: str) -> int:
+    """A whole number >= 1 from ``meta.json``."""
+    v = meta[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v) or v < 1:
+        raise FormatError(f"meta.json: {key} must be a whole number >= 1, got {v!r}")
+    return int(v)
+
+
 def _resolve_size(
     height: int | None, width: int | None, meta: dict[str, Any] | None
 ) -> tuple[int | None, int | None]:
@@ -181,7 +189,7 @@ def _resolve_size(
         height = check_positive_int("height", height)
         width = check_positive_int("width", width)
     if meta is not None and meta.get("height") is not None and meta.get("width") is not None:
-        mh, mw = int(meta["height"]), int(meta["width"])
+        mh, mw = _meta_int(meta, "height"), _meta_int(meta, "width")
         if height is not None and (height, width) != (mh, mw):
             raise InputError(f"size {width}x{height} given, but meta.json states {mw}x{mh}")
         return mh, mw
@@ -198,7 +206,8 @@ def _window_bounds(key_plane: int, total_planes: int, window_planes: int) -> tup
 
 
 def _is_window_recording(meta: dict[str, Any] | None) -> bool:
-    return meta is not None and meta.get("mode", "window") == "window" and meta.get("planes") is not None
+    return (meta is not None and meta.get("mode", "window") == "window" and meta.get("planes") is not None
+            and _meta_int(meta, "planes") > 0)
 
 
 def _plane_of(time_s: float, start_s: float, rate_hz: float) -> int:
