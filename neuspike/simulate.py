@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
-from neuspike.atomic import write_bytes, write_text
+from neuspike.atomic import write_bytes, write_json, write_text
 from neuspike.checks import check_positive, check_positive_int, parse_size
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
@@ -434,22 +434,6 @@ def simulate_sequence(
 # Writing recordings
 # --------------------------------------------------------------------------------------------
 
-def _write_json_atomic(path: Path, obj: Any) -> None:
-    write_text(path, json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (np.floating,)):
-        return float(value)
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    return repr(value)
-
-
 def write_png_atomic(path: Path, image01: np.ndarray) -> None:
     """Write a radiance image as an 8-bit PNG, atomically (HDR values above 1 saturate, by choice)."""
     write_png(path, image01, clip=True)
@@ -485,7 +469,7 @@ def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[st
     meta["files"] = {k: v.name for k, v in written.items()}
     meta["window_start_s"] = recording.window_start_s
     meta["window_end_s"] = recording.window_end_s
-    _write_json_atomic(out / "meta.json", meta)
+    write_json(out / "meta.json", meta)
     written["meta"] = out / "meta.json"
     return written
 
@@ -554,7 +538,7 @@ def write_sequence(
     meta["files"] = {**({"spikes": "spikes.dat"} if dat else {}), **({"events": "events.h5"} if h5 else {}),
                      "frames": "frames/timestamps.txt"}
     meta["ground_truth_frames"] = len(frame_times)
-    _write_json_atomic(out / "meta.json", meta)
+    write_json(out / "meta.json", meta)
     return meta
 
 

@@ -25,7 +25,6 @@ from neuspike.atomic import publish
 from neuspike.checks import check_positive
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats._npz import NpzArchive
-from neuspike.jsonio import json_default
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = ["read_spike_npz", "write_spike_npz"]
@@ -176,6 +175,17 @@ def read_spike_npz(
         raise FormatError(f"{p}: {err}") from None
 
 
+def _json_default(value: Any) -> Any:
+    """NumPy scalars and arrays and paths as JSON; anything else is refused (``TypeError``), not repr'd."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
 def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
     """Write a :class:`SpikeStream` as a compressed ``.npz`` archive, atomically.
 
@@ -192,7 +202,7 @@ def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
     if not isinstance(stream, SpikeStream):
         raise InputError(f"stream: expected a SpikeStream, got {type(stream).__name__}")
     try:
-        meta_json = json.dumps(stream.meta, default=json_default)
+        meta_json = json.dumps(stream.meta, default=_json_default)
     except (TypeError, ValueError) as err:
         raise InputError(f"stream.meta: cannot be stored as JSON ({err})") from None
     arrays: dict[str, np.ndarray] = {
