@@ -39,7 +39,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
+import torch
 
 from bench.grid import Cell
 from bench.results import ERROR, OK, SKIPPED, base_row
@@ -189,15 +191,19 @@ def forget_plugin(plugin: str) -> None:
         sys.modules.pop(module.__name__, None)
 
 
-def prepare_worker(setup: WorkerSetup) -> int | None:
-    """Apply ``setup`` in this process (idempotent); return torch's thread count (None without torch)."""
+def prepare_worker(setup: WorkerSetup) -> int:
+    """Apply ``setup`` in this process (idempotent); return the thread count of torch and numba.
+
+    Both pools get ``setup.threads`` threads, so that workers sharing the cores do not each start a
+    pool of every core (a waiting thread stalls each small operation of the others).
+    """
     load_plugins(plugin_names(setup.plugins))
-    try:
-        import torch
-    except ImportError:  # torch is a dependency; a stripped environment still runs NumPy methods
-        return None
-    if setup.threads is not None and torch.get_num_threads() != setup.threads:
-        torch.set_num_threads(int(setup.threads))
+    if setup.threads is not None:
+        threads = int(setup.threads)
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
+        if numba.get_num_threads() != min(threads, numba.config.NUMBA_NUM_THREADS):
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     return int(torch.get_num_threads())
 
 
