@@ -152,13 +152,14 @@ def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRA
     results: dict[int, dict[str, Any]] = {}
     for i, case in enumerate(all_cases):  # warm-up: compilation, caches, first-touch allocations
         case.setup()
-        results[i] = {"count": case.count(case.run()), "seconds": [], "load": []}
+        results[i] = {"count": case.count(case.run()), "seconds": [], "cpu": [], "load": []}
     for _ in range(repeats):
         for i, case in enumerate(all_cases):
             case.setup()
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             case.run()
             results[i]["seconds"].append(time.perf_counter() - t0)
+            results[i]["cpu"].append(time.process_time() - c0)
             results[i]["load"].append(os.getloadavg()[0])
     _numba_threads(previous)
     rows = []
@@ -167,6 +168,7 @@ def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRA
         med = statistics.median(sec)
         rows.append({"sensor": case.sensor, "config": case.config, "impl": case.impl, "threads": case.threads,
                      "seconds": med, "min": min(sec), "max": max(sec), "rate": frames / med,
+                     "cpu_seconds": statistics.median(results[i]["cpu"]),
                      "unit": "planes/s" if case.sensor == "spike" else "frames/s",
                      "count": results[i]["count"], "load_1min": statistics.median(results[i]["load"]),
                      "width": width, "height": height, "frames": frames})
@@ -218,15 +220,16 @@ def main(argv: list[str] | None = None) -> int:
           f"{w}x{h}; median of {repeats} runs after one warm-up, configurations timed in turn\n")
     rows = run(w, h, repeats, frames)
     print(f"{'sensor':<6} {'configuration':<20} {'implementation':<26} {'thr':>3} {'rate':>18} {'x ref':>6} "
-          f"{'median s':>9} {'spread s':>15} {'load':>5} {'output':>20}")
+          f"{'median s':>9} {'spread s':>15} {'cpu s':>7} {'load':>5} {'output':>20}")
     for r in rows:
         ref = next(x for x in rows if x["sensor"] == r["sensor"] and x["config"] == r["config"])
         rate = f"{r['rate']:,.0f} {r['unit']}"
         what = "spikes" if r["sensor"] == "spike" else "events"
         print(f"{r['sensor']:<6} {r['config']:<20} {r['impl']:<26} {r['threads']:>3} {rate:>18} "
               f"{r['rate'] / ref['rate']:>5.2f}x {r['seconds']:>9.4f} {r['min']:>7.4f}-{r['max']:<7.4f} "
-              f"{r['load_1min']:>5.2f} {r['count']:>13,} {what}")
-    print("\n(x ref: against the first row of the same sensor and configuration, measured in this run)")
+              f"{r['cpu_seconds']:>7.4f} {r['load_1min']:>5.2f} {r['count']:>13,} {what}")
+    print("\n(x ref: against the first row of the same sensor and configuration, measured in this run; cpu s: "
+          "process CPU time, all threads, median; load: 1-minute load average while that row ran)")
     print("verdicts:")
     for line in verdicts(rows):
         print(f"  {line}")
