@@ -200,10 +200,11 @@ def prepare_worker(setup: WorkerSetup) -> int:
     load_plugins(plugin_names(setup.plugins))
     if setup.threads is not None:
         threads = int(setup.threads)
-        if torch.get_num_threads() != threads:
-            torch.set_num_threads(threads)
+        # numba first: starting its OpenMP threading layer resets the OpenMP pool size torch reads
         if numba.get_num_threads() != min(threads, numba.config.NUMBA_NUM_THREADS):
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        if torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)
     return int(torch.get_num_threads())
 
 
