@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Callable
 
 from neuspike.errors import InputError
+from neuspike.scenes.dead_leaves import DeadLeavesScene
 from neuspike.scenes.fan import FanScene
 from neuspike.scenes.pan import PanScene
 from neuspike.scenes.scene import Scene
@@ -18,6 +19,7 @@ __all__ = ["BUILDERS", "make_scene"]
 #: Scene class of every kind of :data:`neuspike.scenes.spec.KINDS`.
 BUILDERS: dict[str, Callable[[SceneSpec], Scene]] = {
     "pan": PanScene, "zoom": ZoomScene, "fan": FanScene, "still": StillScene, "video": VideoScene,
+    "dead_leaves": DeadLeavesScene,
 }
 
 

@@ -21,7 +21,7 @@ from neuspike.conditions import Effect
 from neuspike.errors import InputError
 
 #: Every scene kind.
-KINDS: tuple[str, ...] = ("pan", "zoom", "fan", "still", "video")
+KINDS: tuple[str, ...] = ("pan", "zoom", "fan", "still", "video", "dead_leaves")
 
 #: The view size of the photograph kinds when ``size`` is not given: the Vidar sensor.
 DEFAULT_SIZE: tuple[int, int] = (400, 250)
