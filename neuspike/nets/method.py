@@ -1,0 +1,123 @@
+"""NeuSpike-Net behind the method interface: ``neuspike-net`` (spikes + events) and ``neuspike-net-spike``.
+
+The class also offers what the trainer needs without any weights (the training protocol of
+:mod:`neuspike.train`): :meth:`NeuSpikeNetMethod.module_for` builds an untrained module from a
+variant's parameters and :meth:`NeuSpikeNetMethod.encode_sample` turns a sample into the module's
+input tensors.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import torch
+from torch import nn
+
+from neuspike.errors import FormatError, InputError
+from neuspike.learned import LearnedMethod
+from neuspike.nets.fusion import FUSIONS
+from neuspike.nets.network import NeuSpikeNet
+from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
+                                           spike_representation)
+from neuspike.sample import Sample
+from neuspike.weights import load_safetensors, load_state_strict, read_card
+
+__all__ = ["ARCHITECTURE_PARAMS", "NeuSpikeNetMethod"]
+
+#: The parameters that define the module and its inputs (recorded in the weights card and checked).
+ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only")
+
+
+def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
+    p = {k: params[k] for k in ARCHITECTURE_PARAMS if k in params}
+    missing = [k for k in ARCHITECTURE_PARAMS if k not in p]
+    if missing:
+        raise InputError(f"neuspike-net: missing parameters {missing}")
+    if p["spike_representation"] not in SPIKE_REPRESENTATIONS:
+        raise InputError(f"spike_representation: expected one of {SPIKE_REPRESENTATIONS}, got {p['spike_representation']!r}")
+    if p["event_representation"] not in EVENT_REPRESENTATIONS:
+        raise InputError(f"event_representation: expected one of {EVENT_REPRESENTATIONS}, got {p['event_representation']!r}")
+    if p["fusion"] not in FUSIONS:
+        raise InputError(f"fusion: expected one of {FUSIONS}, got {p['fusion']!r}")
+    if not isinstance(p["spike_only"], bool):
+        raise InputError(f"spike_only: expected True or False, got {p['spike_only']!r}")
+    return p
+
+
+class NeuSpikeNetMethod(LearnedMethod):
+    """NeuSpike-Net (:mod:`neuspike.nets`).
+
+    Parameters
+    ----------
+    spike_representation, event_representation : str
+        T_spike and T_event (:mod:`neuspike.nets.representations`).
+    fusion : str
+        The fusion module F (:mod:`neuspike.nets.fusion`).
+    spike_only : bool
+        The spike-only variant (texture path and decoders; needs no events).
+    event_skip_weight : float
+        ``w`` of the input-level skip (1 on simulated data; the paper uses the maximum of the event
+        integration on real data).
+    **learned
+        :class:`~neuspike.learned.LearnedMethod`'s arguments (weights, device, precision).
+    """
+
+    inputs = frozenset({"spikes", "events"})
+
+    def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
+                 fusion: str, spike_only: bool, event_skip_weight: float = 1.0, **learned: Any) -> None:
+        _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
+                           fusion=fusion, spike_only=spike_only))
+        self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
+        super().__init__(name, spike_representation=spike_representation,
+                         event_representation=event_representation, fusion=fusion, spike_only=spike_only,
+                         event_skip_weight=float(event_skip_weight), **learned)
+
+    # -- the training protocol (no weights needed) ------------------------------------------------
+
+    @classmethod
+    def module_for(cls, params: Mapping[str, Any]) -> nn.Module:
+        """An untrained module for the variant ``params``."""
+        p = _check_params(params)
+        return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
+                           event_skip_weight=float(params.get("event_skip_weight", 1.0)))
+
+    @classmethod
+    def encode_sample(cls, sample: Sample, params: Mapping[str, Any]) -> tuple[torch.Tensor, ...]:
+        """The module's inputs for ``sample``: (spikes,) or (spikes, events), each float32 (1, 32, H, W).
+
+        Raises
+        ------
+        InputError
+            When the sample lacks spikes, or lacks events for the fusion network.
+        """
+        p = _check_params(params)
+        if sample.spikes is None:
+            raise InputError("neuspike-net: the sample has no spikes")
+        x_t = torch.from_numpy(spike_representation(sample, p["spike_representation"]))[None]
+        if p["spike_only"]:
+            return (x_t,)
+        if sample.events is None:
+            raise InputError("neuspike-net: the sample has no events; the fusion network needs spikes and events "
+                             "(neuspike-net-spike takes spikes alone)")
+        x_m = torch.from_numpy(event_representation(sample, p["event_representation"]))[None]
+        return (x_t, x_m)
+
+    # -- LearnedMethod ----------------------------------------------------------------------------
+
+    def build_module(self) -> nn.Module:
+        return self.module_for(self.params)
+
+    def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
+        return [self.encode_sample(sample, self.params)]
+
+    def load_weights(self, module: nn.Module, path: Path) -> None:
+        card = read_card(path)
+        trained = (card or {}).get("model", {}).get("params")
+        if trained is not None:
+            ours = {k: self.params[k] for k in ARCHITECTURE_PARAMS}
+            theirs = {k: trained.get(k) for k in ARCHITECTURE_PARAMS}
+            if ours != theirs:
+                raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")
+        load_state_strict(module, load_safetensors(path), str(path))

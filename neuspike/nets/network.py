@@ -1,0 +1,135 @@
+"""The NeuSpike-Net module: two encoder paths, fused skips, residual blocks, decoders (REFERENCE §1.1).
+
+Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back):
+
+* texture path (spikes) and motion path (events): x^0 (B, 32, H, W) -> three strided 3x3
+  conv + instance norm + ReLU layers -> x^1 (B, 64, H/2, W/2), x^2 (B, 128, H/4, W/4),
+  x^3 (B, 256, H/8, W/8);
+* r^0 = x_t^3 + x_m^3, then two residual blocks (3x3, 256, instance norm before ReLU);
+* three decoders, each a 3x3 transposed convolution (stride 2) + instance norm + ReLU, to 128, 64
+  and 32 channels; after each, the skip of that level is concatenated: F(x_t^2, x_m^2),
+  F(x_t^1, x_m^1), and at the input level x_t^0 + w * x_m^0;
+* prediction: 3x3 convolution of the 64 channels to 1, then ``(tanh + 1) / 2`` in [0, 1].
+
+The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
+path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
+to ``F(t, 0) = t``, so the spike-only network is exactly the full one with the motion path silent,
+and its tensors are a subset of the full network's (same names).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from neuspike.errors import InputError
+from neuspike.nets.fusion import make_fusion
+from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
+
+__all__ = ["NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
+
+#: The supplement's parameter count of the fusion network.
+PAPER_PARAMETERS = 5_985_000
+ENCODER_CHANNELS = (64, 128, 256)
+DECODER_CHANNELS = (128, 64, 32)
+MULTIPLE = 8
+
+
+def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
+    """Zero-pad (B, C, H, W) at the bottom and right to multiples of ``multiple`` (250 -> 256 rows).
+
+    Sides are padded to at least ``2 * multiple`` so that the deepest features have more than one
+    pixel (instance normalisation needs two).
+    """
+    h, w = x.shape[-2:]
+    ph, pw = max((-h) % multiple, 2 * multiple - h), max((-w) % multiple, 2 * multiple - w)
+    return F.pad(x, (0, pw, 0, ph)) if ph or pw else x
+
+
+class _Encoder(nn.Module):
+    def __init__(self, in_channels: int) -> None:
+        super().__init__()
+        chans = (in_channels, *ENCODER_CHANNELS)
+        self.layers = nn.ModuleList(ConvNormReLU(a, b, stride=2) for a, b in zip(chans[:-1], chans[1:]))
+
+    def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
+        feats = [x]
+        for layer in self.layers:
+            feats.append(layer(feats[-1]))
+        return feats
+
+
+class NeuSpikeNet(nn.Module):
+    """NeuSpike-Net (module docstring).
+
+    Parameters
+    ----------
+    in_channels : int
+        Channels of each representation (32).
+    fusion : str
+        The fusion module F (:data:`neuspike.nets.fusion.FUSIONS`).
+    spike_only : bool
+        The texture path and decoders only.
+    event_skip_weight : float
+        ``w`` of the input-level skip ``x_t^0 + w * x_m^0`` (1 on simulated data).
+    """
+
+    def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
+                 event_skip_weight: float = 1.0) -> None:
+        super().__init__()
+        self.in_channels = in_channels
+        self.spike_only = spike_only
+        self.event_skip_weight = float(event_skip_weight)
+        self.texture = _Encoder(in_channels)
+        if not spike_only:
+            self.motion = _Encoder(in_channels)
+            self.fuse1 = make_fusion(fusion, ENCODER_CHANNELS[0])
+            self.fuse2 = make_fusion(fusion, ENCODER_CHANNELS[1])
+        self.residual = nn.Sequential(NormResidualBlock(ENCODER_CHANNELS[2]), NormResidualBlock(ENCODER_CHANNELS[2]))
+        self.up1 = UpConvNormReLU(ENCODER_CHANNELS[2], DECODER_CHANNELS[0])
+        self.up2 = UpConvNormReLU(DECODER_CHANNELS[0] + ENCODER_CHANNELS[1], DECODER_CHANNELS[1])
+        self.up3 = UpConvNormReLU(DECODER_CHANNELS[1] + ENCODER_CHANNELS[0], DECODER_CHANNELS[2])
+        self.predict = nn.Conv2d(DECODER_CHANNELS[2] + in_channels, 1, 3, padding=1)
+
+    def forward(self, spikes: torch.Tensor, events: torch.Tensor | None = None) -> torch.Tensor:
+        """spikes, events: (B, 32, H, W) -> image (B, 1, H, W) in [0, 1].
+
+        ``events`` must be given to the full network and omitted for the spike-only one.
+        """
+        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
+            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        if self.spike_only and events is not None:
+            raise InputError("NeuSpikeNet: the spike-only network takes no events")
+        if not self.spike_only:
+            if events is None:
+                raise InputError("NeuSpikeNet: the fusion network needs the event representation")
+            if events.shape != spikes.shape:
+                raise InputError(f"NeuSpikeNet: events {tuple(events.shape)} and spikes {tuple(spikes.shape)} differ")
+        h, w = spikes.shape[-2:]
+        t = self.texture(pad_to_multiple(spikes))
+        if self.spike_only:
+            return self._decode(t[3], t[2], t[1], t[0])[..., :h, :w]
+        m = self.motion(pad_to_multiple(events))
+        out = self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
+                           t[0] + self.event_skip_weight * m[0])
+        return out[..., :h, :w]
+
+    def forward_texture_only(self, spikes: torch.Tensor) -> torch.Tensor:
+        """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
+
+        spikes: (B, 32, H, W) -> (B, 1, H, W) in [0, 1]; equals the spike-only module holding the
+        same texture-path, residual and decoder weights.
+        """
+        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
+            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        h, w = spikes.shape[-2:]
+        t = self.texture(pad_to_multiple(spikes))
+        return self._decode(t[3], t[2], t[1], t[0])[..., :h, :w]
+
+    def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor) -> torch.Tensor:
+        d = self.up1(self.residual(r))
+        d = self.up2(torch.cat([d, s2], dim=1))
+        d = self.up3(torch.cat([d, s1], dim=1))
+        y = self.predict(torch.cat([d, s0.to(d.dtype)], dim=1))
+        return 0.5 * (torch.tanh(y) + 1.0)

@@ -1,0 +1,135 @@
+"""NeuSpike-Net behind the method interface: representations (closed forms), registry, strict weights, bad input."""
+
+import numpy as np
+import pytest
+import torch
+
+from neuspike.errors import FormatError, InputError
+from neuspike.methods import create, entry
+from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod, event_representation, spike_representation
+from neuspike.nets.representations import interval_rate
+from neuspike.sample import Sample
+from neuspike.streams import EventStream, SpikeStream
+from neuspike.weights import save_safetensors
+
+H, W, T = 12, 20, 256
+
+
+def regular_spikes(period: int, *, gain: float | None) -> SpikeStream:
+    planes = np.zeros((T, H, W), bool)
+    planes[period - 1::period] = True
+    return SpikeStream(planes=planes, plane_rate_hz=20_000.0, start_s=0.0, gain=gain)
+
+
+def make_sample(*, events: bool = True, gain: float | None = 0.25, period: int = 4, seed: int = 0) -> Sample:
+    rng = np.random.default_rng(seed)
+    spikes = regular_spikes(period, gain=gain)
+    end = T / 20_000.0
+    ev = None
+    if events:
+        n = 500
+        ev = EventStream(t_s=np.sort(rng.uniform(0, end, n)), x=rng.integers(0, W, n), y=rng.integers(0, H, n),
+                         p=rng.choice(np.array([-1, 1], np.int8), n), width=W, height=H)
+    return Sample(height=H, width=W, key_time_s=end / 2, window_start_s=0.0, window_end_s=end, spikes=spikes,
+                  events=ev, event_threshold=0.2, ground_truth=np.zeros((H, W), np.float32))
+
+
+@pytest.mark.parametrize("period", [2, 4, 8, 16])
+def test_spike_counts_of_a_regular_train_are_its_radiance(period):
+    gain = 0.25
+    rep = spike_representation(make_sample(period=period, gain=gain), "counts")
+    assert rep.shape == (32, H, W) and rep.dtype == np.float32
+    # one spike every `period` planes is a rate 1/period, radiance rate / gain, in every 8-plane group
+    assert np.allclose(rep.mean(axis=0), 1 / period / gain)
+
+
+def test_interval_of_a_regular_train_is_its_period():
+    planes = regular_spikes(4, gain=1.0).planes
+    centres = np.array([16, 100, 200])
+    assert np.allclose(interval_rate(planes, centres), 0.25)
+    rep = spike_representation(make_sample(period=4, gain=0.5), "counts_interval")
+    assert np.allclose(rep[:16], 0.5) and np.allclose(rep[16:], 0.5)  # (1/4) / 0.5 both ways
+
+
+def test_contrast_representation_sums_to_threshold_times_net_polarity():
+    s = make_sample()
+    rep = event_representation(s, "contrast")
+    ev = s.window_events()
+    net = np.zeros((H, W))
+    np.add.at(net, (ev.y, ev.x), ev.p.astype(float))
+    assert np.allclose(rep.sum(axis=0), 0.2 * net, atol=1e-5)
+
+
+def test_voxel_representation_is_normalised():
+    rep = event_representation(make_sample(), "voxel")
+    nz = rep[rep != 0]
+    assert rep.shape == (32, H, W) and abs(nz.mean()) < 1e-4 and abs(nz.std() - 1) < 1e-3
+
+
+def test_unknown_gain_is_estimated_from_the_data():
+    known = spike_representation(make_sample(gain=0.5), "counts")
+    estimated = spike_representation(make_sample(gain=None), "counts")
+    assert np.allclose(estimated, 1.0)  # the brightest pixels map to radiance 1
+    assert not np.allclose(known, estimated)
+
+
+@pytest.fixture
+def weights_dir(tmp_path):
+    torch.manual_seed(0)
+    for name, spike_only in (("neuspike-net", False), ("neuspike-net-spike", True)):
+        params = {**DEFAULT_DESIGN, "spike_only": spike_only}
+        module = NeuSpikeNetMethod.module_for(params)
+        save_safetensors(module, tmp_path / f"{name}.safetensors", card={"model": {"params": params}})
+    return tmp_path
+
+
+def test_both_methods_are_registered_with_their_inputs():
+    assert entry("neuspike-net").inputs == {"spikes", "events"}
+    assert entry("neuspike-net-spike").inputs == {"spikes"}
+    assert entry("neuspike-net").weights == "neuspike-net.safetensors"
+
+
+def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_thread):
+    for name in ("neuspike-net", "neuspike-net-spike"):
+        method = create(name, weights_dir=weights_dir, precision="float32")
+        image = method.reconstruct(make_sample())
+        assert image.shape == (H, W) and image.dtype == np.float32
+        assert 0.0 <= image.min() and image.max() <= 1.0
+
+
+def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
+    method = create("neuspike-net", weights_dir=weights_dir, precision="float32")
+    with pytest.raises(InputError, match="events"):
+        method.reconstruct(make_sample(events=False))
+    with pytest.raises(InputError, match="no events"):
+        NeuSpikeNetMethod.encode_sample(make_sample(events=False), {**DEFAULT_DESIGN, "spike_only": False})
+    spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
+    assert spike.reconstruct(make_sample(events=False)).shape == (H, W)
+
+
+def test_weights_of_the_wrong_shape_are_a_format_error(tmp_path):
+    params = {**DEFAULT_DESIGN, "spike_only": False}
+    state = NeuSpikeNetMethod.module_for(params).state_dict()
+    state["predict.weight"] = torch.zeros(1, 10, 3, 3)
+    save_safetensors(state, tmp_path / "neuspike-net.safetensors")
+    with pytest.raises(FormatError, match="predict.weight"):
+        create("neuspike-net", weights_dir=tmp_path)
+
+
+def test_a_truncated_weights_file_is_a_format_error(weights_dir):
+    path = weights_dir / "neuspike-net.safetensors"
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(FormatError):
+        create("neuspike-net", weights_dir=weights_dir)
+
+
+def test_weights_trained_for_another_design_are_refused(weights_dir):
+    import json
+
+    card = weights_dir / "neuspike-net.json"
+    data = json.loads(card.read_text())
+    data["model"]["params"]["fusion"] = "attention"
+    card.write_text(json.dumps(data))
+    with pytest.raises(FormatError, match="trained for"):
+        create("neuspike-net", weights_dir=weights_dir)

@@ -1,0 +1,96 @@
+"""NeuSpike-Net module: shapes, parameter counts (closed form), padding, fusion identities, spike-only subset."""
+
+import pytest
+import torch
+
+from neuspike.errors import InputError
+from neuspike.nets import FUSIONS, PAPER_PARAMETERS, NeuSpikeNet, make_fusion, pad_to_multiple
+
+
+def conv(cin, cout, k=3, bias=True):
+    return k * k * cin * cout + (cout if bias else 0)
+
+
+def norm(c):
+    return 2 * c
+
+
+def expected_parameters(fusion: str, spike_only: bool, c_in: int = 32) -> int:
+    """The architecture of REFERENCE §1.1 counted by hand."""
+    enc = conv(c_in, 64) + norm(64) + conv(64, 128) + norm(128) + conv(128, 256) + norm(256)
+    res = 2 * 2 * (conv(256, 256) + norm(256))
+    dec = conv(256, 128) + norm(128) + conv(256, 64) + norm(64) + conv(128, 32) + norm(32)
+    pred = conv(32 + c_in, 1)
+    total = enc + res + dec + pred
+    if spike_only:
+        return total
+    if fusion == "gate":
+        fuse = conv(128, 64) + conv(256, 128)
+    else:
+        fuse = sum(2 * c * (c // 4) + c // 4 + (c // 4) * c + c + conv(c, c, bias=False) for c in (64, 128))
+    return total + enc + fuse
+
+
+@pytest.mark.parametrize("fusion", FUSIONS)
+@pytest.mark.parametrize("spike_only", [False, True])
+def test_parameter_count_matches_the_hand_count(fusion, spike_only):
+    net = NeuSpikeNet(fusion=fusion, spike_only=spike_only)
+    n = sum(p.numel() for p in net.parameters())
+    assert n == expected_parameters(fusion, spike_only)
+    print(f"NeuSpike-Net fusion={fusion} spike_only={spike_only}: {n:,} parameters "
+          f"(paper {PAPER_PARAMETERS:,}, {n - PAPER_PARAMETERS:+,})")
+
+
+@pytest.mark.parametrize("hw", [(37, 53), (8, 8), (25, 40)])
+def test_any_size_is_padded_and_cropped_back(hw, one_torch_thread):
+    torch.manual_seed(0)
+    net = NeuSpikeNet().eval()
+    x = torch.rand(2, 32, *hw)
+    with torch.no_grad():
+        y = net(x, torch.randn(2, 32, *hw))
+    assert y.shape == (2, 1, *hw)
+    assert float(y.min()) >= 0.0 and float(y.max()) <= 1.0
+
+
+def test_padding_is_zero_at_bottom_right_to_multiples_of_8():
+    x = torch.ones(1, 2, 250, 401)
+    p = pad_to_multiple(x)
+    assert p.shape == (1, 2, 256, 408)
+    assert torch.equal(p[..., :250, :401], x)
+    assert float(p[..., 250:, :].abs().sum()) == 0.0 and float(p[..., :, 401:].abs().sum()) == 0.0
+
+
+@pytest.mark.parametrize("fusion", FUSIONS)
+def test_fusion_with_a_silent_motion_feature_is_the_texture_feature(fusion):
+    torch.manual_seed(1)
+    f = make_fusion(fusion, 64)
+    t = torch.randn(2, 64, 8, 8)
+    assert torch.allclose(f(t, torch.zeros_like(t)), t)
+    assert not torch.allclose(f(t, torch.randn_like(t)), t)
+
+
+def test_spike_only_network_is_the_full_network_with_the_motion_path_silenced(one_torch_thread):
+    torch.manual_seed(2)
+    full = NeuSpikeNet().eval()
+    spike = NeuSpikeNet(spike_only=True).eval()
+    subset = {k: v for k, v in full.state_dict().items() if not k.startswith(("motion.", "fuse1.", "fuse2."))}
+    spike.load_state_dict(subset, strict=True)  # the spike-only tensors are a subset of the full ones
+    x = torch.rand(1, 32, 24, 40)
+    with torch.no_grad():
+        assert torch.allclose(spike(x), full.forward_texture_only(x), atol=1e-6)
+        assert not torch.allclose(spike(x), full(x, torch.randn_like(x)), atol=1e-3)
+
+
+def test_bad_inputs_are_typed_errors():
+    net = NeuSpikeNet()
+    x = torch.rand(1, 32, 16, 16)
+    with pytest.raises(InputError, match="needs the event"):
+        net(x)
+    with pytest.raises(InputError, match="32"):
+        net(torch.rand(1, 5, 16, 16), x)
+    with pytest.raises(InputError, match="differ"):
+        net(x, torch.rand(1, 32, 16, 24))
+    with pytest.raises(InputError, match="takes no events"):
+        NeuSpikeNet(spike_only=True)(x, x)
+    with pytest.raises(InputError, match="fusion"):
+        NeuSpikeNet(fusion="concat")
