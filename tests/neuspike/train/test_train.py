@@ -1,0 +1,103 @@
+"""Training: the spec's refusals, deterministic cells and batches, the loss falls, resume reproduces a straight run."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from neuspike.errors import InputError
+from neuspike.train import TrainSpec, load_spec
+from neuspike.train.data import augment, draw_cell, load_sample, save_sample, simulate_cell
+from neuspike.train.loop import Trainer, learning_rate
+
+
+def tiny_spec(tmp_path, **kw) -> TrainSpec:
+    base = dict(out_dir=str(tmp_path / "run"), shard_dir=str(tmp_path / "shard"), steps=4, batch=2, crop=16,
+                view=16, shard_size=3, val_size=2, val_every=2, checkpoint_every=2, warmup=2, workers=1,
+                precision="float32", threads=1)
+    base.update(kw)
+    return TrainSpec(**base)
+
+
+def test_the_spec_refuses_test_photographs_and_round_trips(tmp_path):
+    with pytest.raises(InputError, match="test photographs"):
+        TrainSpec(photos=("camera", "cat"))
+    with pytest.raises(InputError, match="crop"):
+        TrainSpec(crop=200, view=128)
+    spec = tiny_spec(tmp_path)
+    (tmp_path / "spec.json").write_text(json.dumps(spec.as_dict()))
+    assert load_spec(tmp_path / "spec.json") == spec
+
+
+def test_same_seed_same_cells_and_windows(tmp_path):
+    spec = tiny_spec(tmp_path)
+    a = draw_cell(spec, "train", 5, tmp_path)
+    assert a[1:] == draw_cell(spec, "train", 5, tmp_path)[1:] and a[0] == draw_cell(spec, "train", 5, tmp_path)[0]
+    kinds = {draw_cell(spec, "train", i, tmp_path)[3]["kind"] for i in range(40)}
+    assert {"pan", "zoom", "fan", "dead_leaves"} <= kinds
+    lights = [draw_cell(spec, "train", i, tmp_path)[1].light for i in range(40)]
+    assert min(lights) >= spec.light_range[0] and max(lights) <= spec.light_range[1]
+    other = tiny_spec(tmp_path, seed=1)
+    assert [draw_cell(other, "train", i, tmp_path)[3] for i in range(5)] != \
+        [draw_cell(spec, "train", i, tmp_path)[3] for i in range(5)]
+    s1, s2 = simulate_cell(spec, "train", 3, tmp_path), simulate_cell(spec, "train", 3, tmp_path)
+    assert np.array_equal(s1.spikes.planes, s2.spikes.planes) and np.array_equal(s1.events.t_s, s2.events.t_s)
+
+
+def test_saved_windows_load_back_identically(tmp_path):
+    spec = tiny_spec(tmp_path)
+    s = simulate_cell(spec, "val", 0, tmp_path)
+    save_sample(tmp_path / "w.npz", s)
+    back = load_sample(tmp_path / "w.npz")
+    assert np.array_equal(back.spikes.planes, s.spikes.planes)
+    w = s.window_events()
+    assert np.array_equal(back.events.t_s, w.t_s) and np.array_equal(back.events.p, w.p)
+    assert np.array_equal(back.ground_truth, s.ground_truth) and back.spikes.gain == s.spikes.gain
+
+
+def test_augment_applies_one_transform_to_every_tensor():
+    x = torch.arange(2 * 8 * 8, dtype=torch.float32).reshape(2, 8, 8)
+    y = x[:1].clone()
+    a = augment([x, y], np.random.default_rng(3), 6)
+    b = augment([x, y], np.random.default_rng(3), 6)
+    assert torch.equal(a[0], b[0]) and torch.equal(a[0][:1], a[1])
+    assert a[0].shape == (2, 6, 6)
+
+
+def test_learning_rate_warms_up_then_decays_to_the_floor(tmp_path):
+    spec = tiny_spec(tmp_path, steps=100, warmup=10, lr=1e-3, lr_min=1e-5)
+    assert learning_rate(spec, 0) == pytest.approx(1e-4)
+    assert learning_rate(spec, 9) == pytest.approx(1e-3)
+    assert learning_rate(spec, 100) == pytest.approx(1e-5)
+
+
+def test_the_loss_falls_on_a_fixed_batch(tmp_path, one_torch_thread):
+    trainer = Trainer(tiny_spec(tmp_path, lr=2e-3, warmup=1, steps=1000), quiet=True)
+    g = torch.Generator().manual_seed(0)
+    spikes = torch.rand(2, 32, 16, 16, generator=g)
+    events = torch.randn(2, 32, 16, 16, generator=g)
+    target = spikes.mean(dim=1, keepdim=True)
+    losses = []
+    for _ in range(15):
+        losses.append(trainer.train_step([spikes, events], target, spike_only=False)["loss"])
+        trainer.step += 1
+    assert np.mean(losses[-5:]) < 0.7 * np.mean(losses[:3])
+
+
+def test_a_resumed_run_equals_a_straight_run(tmp_path, one_torch_thread):
+    shard = str(tmp_path / "shard")  # one shard: its photo crops are named by path in the scene specs
+    straight = Trainer(tiny_spec(tmp_path / "a", shard_dir=shard), quiet=True)
+    straight.run()
+    Trainer(tiny_spec(tmp_path / "b", shard_dir=shard), quiet=True).run(until=2)  # killed after step 2
+    with pytest.raises(InputError, match="another spec"):
+        Trainer(tiny_spec(tmp_path / "b", shard_dir=shard, lr=1e-3), quiet=True).run()
+    resumed = Trainer(tiny_spec(tmp_path / "b", shard_dir=shard), quiet=True)
+    assert resumed.run()["resumed"]
+    for (k, v), w in zip(straight.module.state_dict().items(), resumed.module.state_dict().values()):
+        assert torch.equal(v, w), k
+    log = (tmp_path / "b" / "run" / "train_log.csv").read_text().splitlines()
+    steps = [int(r.split(",")[0]) for r in log[1:] if ",train," in r]
+    assert steps == [1, 2, 3, 4]
+    assert (tmp_path / "a" / "run" / "neuspike-net.safetensors").exists()
+    assert (tmp_path / "a" / "run" / "neuspike-net-spike.safetensors").exists()
