@@ -119,6 +119,10 @@ def _frames_array(frames: Any) -> np.ndarray:
     return f
 
 
+#: Set bits of every byte value, for counting spikes in packed planes.
+_BITS_SET = np.array([bin(v).count("1") for v in range(256)], np.uint8)
+
+
 class PackedPlanes:
     """Spike planes bit-packed in the Vidar ``.dat`` layout (8 pixels per byte).
 
@@ -158,7 +162,9 @@ class PackedPlanes:
 
     def count(self) -> int:
         """Number of spikes (set bits)."""
-        return int(np.bitwise_count(self.data).sum(dtype=np.int64))
+        if hasattr(np, "bitwise_count"):  # NumPy >= 2.0
+            return int(np.bitwise_count(self.data).sum(dtype=np.int64))
+        return int(_BITS_SET[self.data].sum(dtype=np.int64))
 
     def __repr__(self) -> str:
         return f"PackedPlanes({self.num_planes} planes of {self.width}x{self.height})"
