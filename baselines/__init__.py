@@ -14,7 +14,7 @@ import pkgutil
 from typing import Callable
 
 #: Modules of this package that hold shared code and register no method.
-HELPER_MODULES: frozenset[str] = frozenset({"snm_kernels"})
+HELPER_MODULES: frozenset[str] = frozenset({"snm_kernels", "tfstp_kernels"})
 
 
 def method_modules() -> list[str]:
