@@ -446,15 +446,27 @@ def write_npy_atomic(path: Path, array: np.ndarray) -> None:
     write_bytes(path, buf.getvalue())
 
 
+#: Entries a simulation writes into its folder; a new run replaces all of them.
+RECORDING_ENTRIES = ("spikes.dat", "events.h5", "gt.png", "gt.npy", "meta.json", "frames")
+
+
 def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[str, Path]:
     """Write ``spikes.dat``, ``events.h5``, ``gt.png`` / ``gt.npy`` and ``meta.json`` into ``out_dir``.
 
-    Each file is written atomically; ``meta.json`` is written last, so a folder with a
-    ``meta.json`` is complete.
+    The files are written into a temporary folder beside ``out_dir`` that replaces it in one step
+    when complete (:func:`neuspike.formats.staging.staged_folder`): a run killed at any point
+    leaves ``out_dir`` entirely as it was. No file of an earlier recording
+    (:data:`RECORDING_ENTRIES`) survives beside the new ones; other files in ``out_dir`` are kept.
     """
+    from neuspike.formats.staging import staged_folder
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    final = Path(out_dir)
+    with staged_folder(final, ours=RECORDING_ENTRIES) as staging:
+        written = _write_recording_files(recording, staging)
+    return {k: final / v.name for k, v in written.items()}
+
+
+def _write_recording_files(recording: Recording, out: Path) -> dict[str, Path]:
     written: dict[str, Path] = {}
     if recording.spikes is not None:
         write_dat(out / "spikes.dat", recording.spikes.planes)
@@ -466,6 +478,11 @@ def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[st
     write_npy_atomic(out / "gt.npy", recording.ground_truth.astype(np.float32))
     written["gt"] = out / "gt.png"
     meta = dict(recording.meta)
+    if recording.spikes is not None and recording.spikes.num_planes:
+        # a pixel firing on every plane saturates: its radiance is only known to be >= threshold / L
+        fired_always = recording.spikes.planes.all(axis=0)
+        meta["saturated_pixels"] = int(np.count_nonzero(fired_always))
+        meta["saturated_fraction"] = float(np.mean(fired_always))
     meta["files"] = {k: v.name for k, v in written.items()}
     meta["window_start_s"] = recording.window_start_s
     meta["window_end_s"] = recording.window_end_s
@@ -489,15 +506,26 @@ def write_sequence(
     seed: int | None = None,
 ) -> dict[str, Any]:
     """Continuous simulation streamed to ``out_dir`` (``spikes.dat``, ``events.h5``, ``frames/``,
-    ``frames/timestamps.txt``, ``meta.json``). Files appear only when complete.
+    ``frames/timestamps.txt``, ``meta.json``).
+
+    Everything is written into a temporary folder beside ``out_dir`` that replaces it in one step
+    when complete, as in :func:`write_recording`: a killed run leaves ``out_dir`` as it was.
 
     Ground-truth frames are the scene at its real frame instants inside the span (videos: the
     source frames; other scenes: every 256 planes), with their sensor and scene times.
     """
+    from neuspike.formats.staging import staged_folder
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     mods = _check_modalities(modalities)
+    with staged_folder(Path(out_dir), ours=RECORDING_ENTRIES) as staging:
+        return _write_sequence_files(scene, condition, staging, rng=rng, start_s=start_s, duration_s=duration_s,
+                                     sensor=sensor, time_scale=time_scale, mods=mods, progress=progress, seed=seed)
+
+
+def _write_sequence_files(
+    scene: Any, condition: Condition, out: Path, *, rng: np.random.Generator, start_s: float, duration_s: float,
+    sensor: SensorConfig, time_scale: float, mods: frozenset[str], progress: bool, seed: int | None,
+) -> dict[str, Any]:
     dat = DatWriter(out / "spikes.dat") if SPIKES in mods else None
     h5 = EventsH5Writer(out / "events.h5", scene.width, scene.height) if EVENTS in mods else None
 
@@ -627,7 +655,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from neuspike.formats.staging import check_writable_folder
 
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    check_writable_folder(out.parent, what="--out: the folder")  # before any work, not after it
     modalities = _check_modalities(m.strip() for m in args.modalities.split(",") if m.strip())
     sensor = SensorConfig(planes=args.planes, plane_rate_hz=args.plane_rate, spike_threshold=args.threshold,
                           event_threshold=args.event_threshold)
@@ -650,7 +683,6 @@ def _run(args: argparse.Namespace) -> int:
     scene = make_scene(SceneSpec(**spec_kwargs))
     mode = args.mode or ("continuous" if args.video else "window")
     rng = derive_rng(args.seed, "simulate", scene.describe(), condition.as_dict(), mode)
-    out = Path(args.out)
     t0 = time.perf_counter()
     if mode == "window":
         rec = simulate_window(scene, condition, rng=rng, sensor=sensor, center_s=args.at, modalities=modalities,
@@ -677,6 +709,11 @@ def _run(args: argparse.Namespace) -> int:
     ran = ", ".join(f"{s['name']} {s['seconds'] * 1e3:.1f} ms" for s in meta["stages"])
     print(f"wrote {out}/: {'; '.join(parts)} in {elapsed:.2f} s")
     print(f"stages: {ran}")
+    saturated = json.loads((out / "meta.json").read_text()).get("saturated_fraction")
+    if saturated:
+        print(f"warning: {saturated:.1%} of the pixels fired on every plane (saturated: the light scale "
+              f"{condition.light:g} is too high for threshold {sensor.spike_threshold:g}; spike methods cannot "
+              f"tell their radiance apart)", file=sys.stderr)
     return 0
 
 
