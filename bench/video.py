@@ -177,6 +177,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     names = list(spec.methods) or [n for n in available()]
     run_meta = collect(executor={"kind": "in-process"}, threads_per_worker=torch.get_num_threads(),
                        start=now_iso(), contended=False)
+    load_start = _load_average()
     with tempfile.TemporaryDirectory(prefix="video-bench-") as tmp:
         folder = Path(cache) if cache is not None else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
@@ -212,12 +213,23 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
 
     with replacing(out / "results.csv") as tmp_csv:
         frame.to_csv(tmp_csv, index=False, float_format="%.6g")
-    run_meta = finish(run_meta, simulation_s=sim_s, recording=meta.get("scene"), event_count=meta.get("event_count"),
+    run_meta = finish(run_meta, load_average_start=load_start, load_average_end=_load_average(), simulation_s=sim_s,
+                      recording=meta.get("scene"), event_count=meta.get("event_count"),
                       spike_count=meta.get("spike_count"), torch_threads=torch.get_num_threads())
     write_text(out / "metadata.json", json.dumps({"spec": asdict(spec), "run": run_meta}, indent=2, default=str) + "\n")
     write_text(out / "README.md", markdown(frame, spec, run_meta))
     plot(out / "results.csv", out / "accuracy_vs_speed.png")
     return rows
+
+
+def _load_average() -> list[float] | None:
+    """The machine's 1, 5 and 15 minute load averages (other work slows every figure down)."""
+    try:
+        import os
+
+        return [round(v, 2) for v in os.getloadavg()]
+    except (AttributeError, OSError):
+        return None
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -235,7 +247,8 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         f"The fan at {spec.rpm:g} RPM, {spec.width}x{spec.height}, L = {spec.light:g}, simulated in continuous mode "
         f"({spec.duration_s:g} s of sensor time), streamed at {spec.fps:g} output frames per second of sensor time; "
         f"{len(frame)} rows. Machine: {m.get('cpu_model') or '?'}, {m.get('usable_cpus')} usable CPUs, torch threads "
-        f"{run_meta.get('torch_threads')}; commit {run_meta.get('source', {}).get('commit', '?')}. "
+        f"{run_meta.get('torch_threads')}, load average {run_meta.get('load_average_start')} at the start and "
+        f"{run_meta.get('load_average_end')} at the end; commit {run_meta.get('source', {}).get('commit', '?')}. "
         "frames/s is the method's own time (reading excluded; see the read-only row); real-time factor = frames/s "
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"

@@ -60,6 +60,7 @@ class VideoSpec:
     play_fps: float = 25.0
     frames: tuple[str, ...] = ("png",)
     sheet_frames: int = 6
+    sheet_width: int = 1600
     window_planes: int | None = None
     event_history_s: float | None = None
     height: int | None = None
@@ -117,6 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--play-fps", type=float, default=25.0, help="playback rate of the .mp4 files (default: 25)")
     p.add_argument("--frames", default="png", help="per-frame files: png, npy, png,npy or none (default: png)")
     p.add_argument("--sheet-frames", type=int, default=6, help="instants in the contact sheet (default: 6)")
+    p.add_argument("--sheet-width", type=int, default=1600,
+                   help="largest width of the contact sheet in pixels; tiles shrink to fit (default: 1600)")
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: 256; a simulated window's own length)")
     p.add_argument("--event-history", type=float, metavar="SECONDS",
@@ -160,7 +163,8 @@ def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     return VideoSpec(
         methods=methods, out=args.out, recording=args.recording, spikes=args.spikes, events=args.events,
         fps=args.fps, start_s=args.start, end_s=args.end, play_fps=args.play_fps, frames=frames,
-        sheet_frames=args.sheet_frames, window_planes=args.window_planes, event_history_s=args.event_history,
+        sheet_frames=args.sheet_frames, sheet_width=args.sheet_width, window_planes=args.window_planes,
+        event_history_s=args.event_history,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
         gain=args.gain, weights=weights_dir_from_env(args.weights), device=args.device,
         progress=not args.no_progress,
@@ -226,6 +230,8 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         raise InputError(f"--play-fps must be positive, got {spec.play_fps!r}")
     if spec.sheet_frames < 1:
         raise InputError(f"--sheet-frames must be at least 1, got {spec.sheet_frames}")
+    if spec.sheet_width < 64:
+        raise InputError(f"--sheet-width must be at least 64 pixels, got {spec.sheet_width}")
     history = EVENT_HISTORY_S if spec.event_history_s is None else spec.event_history_s
     if history < 0 or not math.isfinite(history):
         raise InputError(f"--event-history must be >= 0 seconds, got {history!r}")
@@ -308,7 +314,8 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
             wall = time.perf_counter() - wall0
             if bar is not None:
                 bar.close()
-            sheet_img = contact_sheet([(r, sheet[r]) for r in rows], [float(times[i]) for i in sheet_idx])
+            sheet_img = contact_sheet([(r, sheet[r]) for r in rows], [float(times[i]) for i in sheet_idx],
+                                      max_width_px=spec.sheet_width)
             for wtr in writers:
                 wtr.close()
         except BaseException:
