@@ -43,17 +43,19 @@ the steady state exactly once converged and is unbiased from a cold start, for a
 ``q``: it is a normalised weighted mean of the refined current. Because the refined current
 conserves charge, a perfectly periodic spike train of period ``P`` gives ``x = 1 / P`` on every
 plane and the read-out ``1 / P`` exactly. The rate becomes an image through
-:func:`baselines.normalisation.rate_to_image`: divided by the stream's gain when known (radiance),
+:func:`neuspike.normalisation.rate_to_image`: divided by the stream's gain when known (radiance),
 the robust 99th-percentile scale when not (real recordings).
 
 Speed
 -----
-Two plane loops (a backward one that tabulates each plane's next spike and the ISI after it, a
-forward one that runs the three layers), each a few dozen in-place operations on (H, W) float32
-buffers per plane. They run on one torch intra-op thread, restoring the caller's setting after
-(:func:`_one_intra_op_thread`): per-operation thread barriers cost more than they gain on planes
-this small and stall badly on a shared machine. About 0.6 s per 400x250 frame of 256 planes on one
-core of the reference machine.
+Two implementations of the plane loops, chosen by ``backend``: the compiled kernel of
+:mod:`baselines.snm_kernels` (numba, every pixel's layers fused into one vectorised pass per row and
+plane, row bands in parallel on ``numba.get_num_threads()`` threads; the default where numba can be
+imported) and the reference, two plane loops of in-place torch operations on (H, W) float32 buffers
+(a backward one that tabulates each plane's next spike and the ISI after it, a forward one that runs
+the three layers) on one torch intra-op thread (:func:`_one_intra_op_thread`: per-operation thread
+barriers cost more than they gain on planes this small). The two agree to a few float32 roundings
+(``tests/baselines/test_snm.py`` states the tolerance); ``python -m bench.method_speed`` times both.
 
 Simplifications of the authors' model (each one deliberate)
 -----------------------------------------------------------
@@ -159,6 +161,14 @@ MOTION_THRESHOLD = 0.25
 MOTION_MEMORY_ISI = 1.0
 #: Discount exp(-STEP_FORGETTING) of everything before a located change of a pixel's input.
 STEP_FORGETTING = 4.0
+
+#: Accepted values of ``backend``: the compiled kernel, the torch reference, or numba where available.
+BACKENDS: tuple[str, ...] = ("auto", "numba", "torch")
+
+try:  # numba is a dependency, but the method must still run where it cannot be imported
+    from baselines import snm_kernels as _kernels
+except ImportError:  # pragma: no cover - exercised only without numba
+    _kernels = None
 
 # Floor of the kernel weight of planes after the key plane: keeps float32 away from denormals (slow)
 # and underflow; a plane this far from the key plane in decays contributes nothing measurable.
@@ -457,6 +467,7 @@ def snm_state(
     motion_memory_isi: float = MOTION_MEMORY_ISI,
     step_forgetting: float = STEP_FORGETTING,
     dynamic_refining: bool = True,
+    backend: str = "auto",
 ) -> SNMState:
     """Run the motion-excitation, refining and reconstruction layers over the window.
 
@@ -470,6 +481,11 @@ def snm_state(
         Planes per second of sensor time (converts the time constants to planes).
     threshold_time_constant_ms, motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining
         See :class:`SNM`.
+    backend : {"auto", "numba", "torch"}
+        ``"numba"``: the compiled kernel (:mod:`baselines.snm_kernels`); ``"torch"``: the reference
+        plane loop of tensor operations; ``"auto"``: numba where it can be imported. Both compute
+        the same float32 arithmetic in the same order (they agree to float32 rounding; see
+        :data:`BACKENDS`).
 
     Returns
     -------
@@ -488,8 +504,42 @@ def snm_state(
     planes, key_plane = _check_planes(planes, key_plane)
     p = _params(plane_rate_hz, threshold_time_constant_ms, STDP_TIME_CONSTANT_MS, COUPLING_LENGTH_PX,
                 motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining)
+    if _resolve_backend(backend) == "numba" and _kernels.fits_exp_range(1.0 / p.motion_memory_isi, planes.shape[0]):
+        return _integrate_compiled(planes, key_plane, p)
     with _one_intra_op_thread():
         return _integrate(torch.from_numpy(planes.view(np.uint8)), key_plane, p)
+
+
+def _resolve_backend(backend: Any) -> str:
+    """``"numba"`` or ``"torch"`` for a requested backend (see :data:`BACKENDS`)."""
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if _kernels is not None else "torch"
+    if backend == "numba" and _kernels is None:
+        raise InputError("backend 'numba': numba cannot be imported here; use backend='torch' or 'auto'")
+    return backend
+
+
+def _still_decay(p: _Params) -> np.float32:
+    """``exp(-1/tau)``, the decay per plane of a pixel that is not excited, with the reference's
+    own float32 operations (``0 / b * (-1 / memory) - 1 / tau``, then torch's exp)."""
+    x = torch.zeros(64).div_(torch.ones(64)).mul_(-1.0 / p.motion_memory_isi).sub_(1.0 / p.threshold_tau_planes)
+    return np.float32(x.exp_()[0].item())
+
+
+def _integrate_compiled(planes: np.ndarray, key_plane: int, p: _Params) -> SNMState:
+    """:func:`_integrate` through the compiled kernel (``planes`` bool (T, H, W), validated inputs)."""
+    charge, mass, count, first, excited = _kernels.snm_integrate(
+        planes, key_plane, motion_threshold=p.motion_threshold, dynamic_refining=p.dynamic_refining,
+        lost_at_cut=-math.expm1(-p.step_forgetting), static_rate=1.0 / p.threshold_tau_planes,
+        motion_rate=1.0 / p.motion_memory_isi, decay_still=_still_decay(p), min_weight=_MIN_WEIGHT,
+    )
+    charge *= np.float32(THRESHOLD_STEP_MV)
+    return SNMState(
+        threshold_excess_mv=torch.from_numpy(charge), mass=torch.from_numpy(mass), count=torch.from_numpy(count),
+        first_spike=torch.from_numpy(first), excited_planes=torch.from_numpy(excited),
+    )
 
 
 def _integrate(spikes: torch.Tensor, key_plane: int, p: _Params) -> SNMState:
@@ -658,6 +708,7 @@ def snm_rate(
     motion_memory_isi: float = MOTION_MEMORY_ISI,
     step_forgetting: float = STEP_FORGETTING,
     dynamic_refining: bool = True,
+    backend: str = "auto",
 ) -> np.ndarray:
     """SNM-style spike rate at the key plane, read out of the adaptive thresholds.
 
@@ -672,6 +723,8 @@ def snm_rate(
     threshold_time_constant_ms, stdp_time_constant_ms, coupling_length_px, motion_threshold,
     motion_memory_isi, step_forgetting, dynamic_refining
         See :class:`SNM`.
+    backend : {"auto", "numba", "torch"}
+        The plane loops' implementation (see :func:`snm_state`).
 
     Returns
     -------
@@ -685,7 +738,7 @@ def snm_rate(
     state = snm_state(
         planes, key_plane, plane_rate_hz=plane_rate_hz, threshold_time_constant_ms=threshold_time_constant_ms,
         motion_threshold=motion_threshold, motion_memory_isi=motion_memory_isi,
-        step_forgetting=step_forgetting, dynamic_refining=dynamic_refining,
+        step_forgetting=step_forgetting, dynamic_refining=dynamic_refining, backend=backend,
     )
     with _one_intra_op_thread():
         known = state.mass > 0

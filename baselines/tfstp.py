@@ -74,10 +74,19 @@ RECOVERY_PLANES = 1.0  # D
 FACILITATION_PLANES = 10.0  # F
 FACILITATION = 0.15  # f
 
+#: Accepted values of ``backend``: the compiled pass, the NumPy reference, or numba where available.
+BACKENDS: tuple[str, ...] = ("auto", "numba", "numpy")
+
+try:  # numba is a dependency, but the method must still run where it cannot be imported
+    from baselines import tfstp_kernels as _kernels
+except ImportError:  # pragma: no cover - exercised only without numba
+    _kernels = None
+
 #: Upper bound of the time constants (planes): keeps exp(-1 / tau) distinguishable from 1.
 MAX_TIME_CONSTANT_PLANES = 1.0e4
 # Below this, a / b (a <= 1) could overflow; the read-out switches to a difference of logarithms.
 _TINY = 1.0e-290
+_SATURATED = "TFSTP read-out: a state reached its saturation (u = 1 or R = 0); check the parameters"
 
 
 def check_stp_params(
@@ -103,6 +112,17 @@ def check_stp_params(
             )
         taus.append(v)
     return out[0], taus[0], taus[1], out[1]
+
+
+def _resolve_backend(backend: Any) -> str:
+    """``"numba"`` or ``"numpy"`` for a requested backend (see :data:`BACKENDS`)."""
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if _kernels is not None else "numpy"
+    if backend == "numba" and _kernels is None:
+        raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
+    return backend
 
 
 def _step_inplace(
@@ -222,7 +242,7 @@ def _inverse_interval(tau: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if not (log_term > 0).all():
         # a > 0 always holds for valid parameters (u >= u0 > 0, R > 0, and u < 1 since every
         # update decays by exp(-Δ/F) < 1); a zero here would mean an infinite rate.
-        raise NeuSpikeError("TFSTP read-out: a state reached its saturation (u = 1 or R = 0); check the parameters")
+        raise NeuSpikeError(_SATURATED)
     return 1.0 / (tau * log_term)
 
 
@@ -251,6 +271,7 @@ def tfstp_state(
     recovery_planes: float = RECOVERY_PLANES,
     facilitation_planes: float = FACILITATION_PLANES,
     facilitation: float = FACILITATION,
+    backend: str = "auto",
 ) -> tuple[np.ndarray, np.ndarray]:
     """The STP states at the key plane, from the spikes of planes ``0 .. key_plane``.
 
@@ -260,6 +281,10 @@ def tfstp_state(
     key_plane : int in [0, T)
     u0, recovery_planes, facilitation_planes, facilitation : float
         ``u0``, ``D``, ``F`` and ``f``.
+    backend : {"auto", "numba", "numpy"}
+        ``"numba"``: the compiled per-pixel pass (:mod:`baselines.tfstp_kernels`); ``"numpy"``: the
+        reference plane loop over the pixels that fire; ``"auto"``: numba where it can be imported.
+        Both run the same float64 operations in the same order: the states are equal bit for bit.
 
     Returns
     -------
@@ -269,6 +294,7 @@ def tfstp_state(
     """
     planes, key_plane = check_spike_window(planes, key_plane)
     u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    compiled = _resolve_backend(backend) == "numba"
     n = key_plane + 1
     h, w = planes.shape[1:]
     size = h * w
@@ -281,6 +307,8 @@ def tfstp_state(
     decay_r, decay_u = np.exp(-lags / d), np.exp(-lags / big_f)
     decay_r[n + 1 :] = 0.0
     decay_u[n + 1 :] = 0.0
+    if compiled:
+        return _kernels.stp_states(np.ascontiguousarray(planes), n, decay_r, decay_u, u0, f)
     last = np.full(size, -(n + 1), dtype=np.int64)  # plane of each pixel's last spike
     q = np.zeros(size)
     v = np.zeros(size)
@@ -322,6 +350,7 @@ def tfstp_rate(
     recovery_planes: float = RECOVERY_PLANES,
     facilitation_planes: float = FACILITATION_PLANES,
     facilitation: float = FACILITATION,
+    backend: str = "auto",
 ) -> np.ndarray:
     """TFSTP's rate estimate at the key plane, from the two read-outs.
 
@@ -331,6 +360,8 @@ def tfstp_rate(
     key_plane : int in [0, T)
     u0, recovery_planes, facilitation_planes, facilitation : float
         ``u0``, ``D``, ``F`` and ``f``.
+    backend : {"auto", "numba", "numpy"}
+        How the states are computed (see :func:`tfstp_state`; the same bits either way).
 
     Returns
     -------
@@ -340,7 +371,13 @@ def tfstp_rate(
         to the key plane.
     """
     u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
-    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f)
+    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f,
+                       backend=backend)
+    if _resolve_backend(backend) == "numba":
+        rate, saturated = _kernels.stp_rate(q, v, u0, d, big_f, f, _TINY)
+        if saturated:
+            raise NeuSpikeError(_SATURATED)
+        return rate
     rate_r, rate_u = _rates(q, v, u0, d, big_f, f)
     rate = rate_r + rate_u
     rate[(rate_r > 0) & (rate_u > 0)] *= 0.5  # the mean where both moved, else the one that did

@@ -371,6 +371,47 @@ def test_tfstp_state_is_causal():
         np.testing.assert_array_equal(a, b)
 
 
+def simulated_window(kind: str, light: float, seed: int) -> np.ndarray:
+    """A 256-plane window of the suite's simulator (pan or still photograph, 64x40, random charge)."""
+    from neuspike.conditions import Condition, effect
+    from neuspike.scenes import SceneSpec, make_scene
+    from neuspike.simulate import simulate_window
+
+    scene = make_scene(SceneSpec(kind=kind, image="camera", size=(64, 40), velocity_px_s=(3000.0, 800.0)))
+    cond = Condition(light=light, motion=64, effects=(effect("initial_charge"),))
+    return simulate_window(scene, cond, rng=np.random.default_rng(seed), modalities={"spikes"}).spikes.planes
+
+
+@pytest.mark.parametrize("kind", ["still", "pan"])
+@pytest.mark.parametrize("light", [1 / 32, 1 / 4, 1 / 2])
+def test_tfstp_compiled_pass_equals_the_numpy_reference(kind, light):
+    # Same float64 operations in the same order: the states and the rate agree bit for bit.
+    planes = simulated_window(kind, light, seed=4)
+    for key in (0, 63, 128, 255):
+        fast = tfstp_state(planes, key, backend="numba")
+        ref = tfstp_state(planes, key, backend="numpy")
+        for a, b in zip(fast, ref):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(tfstp_rate(planes, key, backend="numba"),
+                                      tfstp_rate(planes, key, backend="numpy"))
+
+
+def test_tfstp_compiled_pass_on_long_windows_and_edge_cases():
+    # More than 64 planes per bit mask word, the hard cases' trains, and the saturation limit.
+    rng = np.random.default_rng(10)
+    planes = rng.random((300, 3, 17)) < rng.uniform(0.0, 1.0, (3, 17))
+    planes[:, 0, 0] = True
+    planes[:, 0, 1] = False
+    for key in (62, 63, 64, 127, 128, 299):
+        np.testing.assert_array_equal(tfstp_rate(planes, key, backend="numba"),
+                                      tfstp_rate(planes, key, backend="numpy"))
+    params = {"u0": 0.5, "recovery_planes": 3.0, "facilitation_planes": 40.0, "facilitation": 0.6}
+    np.testing.assert_array_equal(tfstp_rate(planes, 200, backend="numba", **params),
+                                  tfstp_rate(planes, 200, backend="numpy", **params))
+    with pytest.raises(InputError, match="backend"):
+        tfstp_rate(planes, 5, backend="torch")
+
+
 # --- every method: hard cases, ground truth never read -------------------------------------------
 
 
