@@ -300,9 +300,6 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
 
     k_frames, h, w = frames.shape
     threads = numba.get_num_threads()
-    if frames.dtype not in (np.float32, np.float64):
-        frames = frames.astype(np.float32)  # float16 and the like: numba has no kernel for them
-    frames = np.ascontiguousarray(frames)
     if packed:
         rows = _band_rows(h, w, 8, threads)
         out = np.empty((k_frames * hold, h * w // 8), np.uint8)
@@ -312,11 +309,28 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
         out = np.empty((k_frames * hold, h, w), np.bool_)
         kernel = spike_kernels.fire_planes
     negatives = np.zeros(-(-h // rows), np.int64)
-    kernel(frames, hold, light, threshold, charge, dark, rows, out, negatives)
+    if frames.dtype == np.float32:
+        kernel(np.ascontiguousarray(frames), hold, light, threshold, charge, dark, rows, out, negatives)
+    else:
+        # other float types go through a small float32 buffer, a few frames at a time: the kernel
+        # is compiled for float32 frames only, and no full-size copy is made
+        step = max(1, _CONVERT_CHUNK_PIXELS // (h * w))
+        staging = np.empty((min(step, k_frames), h, w), np.float32)
+        counts = np.zeros_like(negatives)
+        for k0 in range(0, k_frames, step):
+            k1 = min(k_frames, k0 + step)
+            chunk = staging[:k1 - k0]
+            np.copyto(chunk, frames[k0:k1], casting="same_kind")
+            kernel(chunk, hold, light, threshold, charge, dark, rows, out[k0 * hold:k1 * hold], counts)
+            negatives += counts
     # NaN and +inf cannot leave the charge, so a finite charge and no negative value mean valid input
     if negatives.any() or not np.isfinite(charge).all():
         _first_bad_frame(frames)
     return PackedPlanes(out, height=h, width=w) if packed else out
+
+
+#: Pixels converted to float32 at a time for frames of another float type.
+_CONVERT_CHUNK_PIXELS = 1 << 20
 
 
 #: Bytes of per-pixel float32 state the plane loop aims to keep in cache at once (see _integrate).

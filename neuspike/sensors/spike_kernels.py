@@ -59,7 +59,7 @@ def _fire_row_dark(frame, light, threshold, charge, dark, out):
 def fire_planes(frames, hold, light, threshold, charge, dark, band_rows, out, negatives):
     """Bool planes ``out`` (K * hold, H, W); ``charge`` (H, W) float32 is updated in place.
 
-    ``frames`` (K, H, W) float32 or float64; ``light`` and ``threshold`` float32; ``dark`` (H, W)
+    ``frames`` (K, H, W) float32; ``light`` and ``threshold`` float32; ``dark`` (H, W)
     float32 or ``None`` (a separate specialisation); ``negatives`` (number of bands,) int64 receives each band's
     count of radiance values < 0 (counted once per frame, on its first plane).
     """

@@ -166,6 +166,22 @@ def test_invalid_radiance_gives_the_same_error_on_both_backends(packed, bad, fra
 
 
 @needs_numba
+@pytest.mark.parametrize("packed", [False, True])
+def test_float64_frames_converted_a_few_at_a_time_give_the_same_planes(packed, monkeypatch):
+    monkeypatch.setattr(spike_camera, "_CONVERT_CHUNK_PIXELS", 2 * 6 * 8)  # two frames per chunk
+    rng = np.random.default_rng(17)
+    frames = rng.random((7, 6, 8)) * 1.7  # float64
+    kw = dict(hold_planes=3, light=0.9, threshold=0.8, dark_charge=rng.random((6, 8)) * 0.01, packed=packed)
+    (planes, charge), (ref, ref_charge) = both_backends(frames, **kw)
+    got, want = (planes.data, ref.data) if packed else (planes, ref)
+    np.testing.assert_array_equal(got, want)
+    assert charge.tobytes() == ref_charge.tobytes()
+    frames[5, 1, 1] = -2.0  # in the third chunk
+    with pytest.raises(InputError, match=r"frames\[5\].*-2\.0"):
+        integrate_and_fire(frames, backend="numba", **kw)
+
+
+@needs_numba
 def test_negative_zero_and_float64_underflow_are_accepted_like_the_numpy_path():
     frames = np.full((2, 2, 4), 0.25)
     frames[0, 0, 0] = -0.0
