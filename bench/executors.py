@@ -11,6 +11,8 @@ down (the sweep records the executor, the worker count and the threads in ``meta
     ``workers == 1``: cells run one after another in this process (methods registered in-process
     are visible). ``workers > 1``: a :class:`concurrent.futures.ProcessPoolExecutor` with the
     ``spawn`` start method (safe with torch's thread pools); workers import plug-ins themselves.
+    Each worker watches its parent and exits within :data:`PARENT_CHECK_S` seconds of the parent's
+    death (a killed sweep leaves no orphaned workers computing for nobody).
 ``dask``
     ``scheduler`` given: connect to that Dask scheduler (``tcp://host:8786``); the workers need
     this package installed, and plug-ins importable or given as paths they can read. No
@@ -21,12 +23,31 @@ down (the sweep records the executor, the worker count and the threads in ``meta
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Iterable, Iterator
 
 from neuspike.errors import InputError
 
 EXECUTORS = ("local", "dask")
+#: Seconds between a worker's checks that its parent is still alive.
+PARENT_CHECK_S = 0.5
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """Worker initializer: a daemon thread ends this process once ``parent_pid`` is gone.
+
+    When the parent dies its children are adopted by another process, so the parent id changes.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(70)  # no cleanup: the results would go nowhere
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 class LocalExecutor:
@@ -46,7 +67,8 @@ class LocalExecutor:
 
     def __enter__(self) -> "LocalExecutor":
         if self.workers > 1:
-            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_exit_with_parent, initargs=(os.getpid(),))
         return self
 
     def __exit__(self, *exc: Any) -> None:
