@@ -53,12 +53,14 @@ undeclared stage executes no code and draws no random numbers.
 Presets with v2e's numbers are in :data:`neuspike.conditions.EVENT_PRESETS`.
 
 Implementation
-    Two backends give the same events, byte for byte (``backend=``). The compiled one
-    (:mod:`neuspike.sensors.event_kernels`, numba) runs the ideal pixel with ``threshold_mismatch``,
-    ``bandwidth`` and ``leak`` as one pass over the pixels per interval, then builds, orders (a
-    bucket sort of the same keys) and writes the interval's events in a second compiled pass; a
-    camera that declares ``shot_noise`` or ``refractory`` runs the NumPy path below, as does
-    ``backend="numpy"`` (the reference) and any machine where numba cannot be imported.
+    Two backends give the same events, byte for byte (``backend=``). On the compiled one
+    (:mod:`neuspike.sensors.event_kernels`, numba) a single pass per interval finishes the
+    lin-log (the ``log`` itself stays NumPy's), runs ``bandwidth`` and ``leak``, and lists the
+    crossing pixels with their event counts; without ``shot_noise`` and ``refractory`` a second
+    compiled pass builds the interval's keys (below), NumPy's sort orders them and a third pass
+    decodes them into the output, optionally in a worker thread (``threads=2``); with either of
+    those stages the crossing pixels go on through the NumPy code below. ``backend="numpy"`` (the
+    reference, and the fallback where numba cannot be imported) runs everything in NumPy.
 
     On the NumPy path, per sample interval every pixel is updated with whole-array float32 operations into
     preallocated buffers; only the pixels that cross a threshold go further. Each of their
@@ -392,7 +394,10 @@ class EventCamera:
             with ``meta = {"stages": [{"name", "params", "seconds"}, ...], "event_count": N}``
             listing the stages that ran (always ``dvs_pixel``, the ideal pixel, first) and the
             wall time charged to each; the frozen draws of ``threshold_mismatch`` and ``leak``
-            (made at construction) are charged to the capture that initialises the camera.
+            (made at construction) are charged to the capture that initialises the camera. On
+            the numba backend ``bandwidth`` and ``leak`` run inside the compiled pixel pass: their
+            entries say ``"fused_into": "dvs_pixel"`` and their time is part of ``dvs_pixel``'s.
+            ``dvs_pixel``'s params name the backend.
 
         Raises
         ------
