@@ -61,21 +61,43 @@ def _planes(sample: Sample) -> np.ndarray:
     return planes
 
 
-def interval_rate(planes: np.ndarray, centres: np.ndarray) -> np.ndarray:
+# Index (0 = most significant) of the first and the last set bit of every byte value (0 for 0, unused).
+_FIRST_BIT = np.array([next((j for j in range(8) if b >> (7 - j) & 1), 0) for b in range(256)], np.int32)
+_LAST_BIT = np.array([next((j for j in range(7, -1, -1) if b >> (7 - j) & 1), 0) for b in range(256)], np.int32)
+
+
+def interval_rate(planes: np.ndarray, centres: np.ndarray, *, group: int | None = None) -> np.ndarray:
     """``1 / ISI`` at each plane index of ``centres``: float32 (len(centres), H, W), spikes per plane.
 
     ISI at centre c is ``next(c) - prev(c)`` with ``prev`` the last spike plane < c and ``next`` the
     first spike plane >= c; missing sides count as a spike one window length (T) outside the window.
+    The planes are scanned in groups of ``group`` planes (default: the greatest common divisor of the
+    centres and T, so every centre lies on a group boundary): each group's first and last spike,
+    then running extremes over the groups.
     """
-    t = planes.shape[0]
-    idx = np.arange(t, dtype=np.int16)[:, None, None]
-    prev = np.maximum.accumulate(np.where(planes, idx, np.int16(-t)), axis=0)
-    nxt = np.minimum.accumulate(np.where(planes, idx, np.int16(2 * t))[::-1], axis=0)[::-1]
-    out = np.empty((len(centres), *planes.shape[1:]), np.float32)
-    for k, c in enumerate(centres):
-        before = prev[c - 1] if c > 0 else np.full(planes.shape[1:], -t, np.int16)
-        out[k] = 1.0 / (nxt[c].astype(np.float32) - before.astype(np.float32))
-    return out
+    t, h, w = planes.shape
+    centres = np.asarray(centres, dtype=np.int64)
+    if group is None:
+        group = int(np.gcd.reduce(np.concatenate([centres[centres > 0], [t]])))
+    n = t // group
+    u8 = np.ascontiguousarray(planes).view(np.uint8).reshape(n, group, h, w)
+    offsets = (np.arange(n, dtype=np.int32) * group)[:, None, None]
+    if group == 8:  # each group's 8 planes as one byte (plane 0 = most significant bit): table look-ups
+        byte = np.zeros((n, h, w), np.uint8)
+        for j in range(8):
+            byte |= u8[:, j] << np.uint8(7 - j)
+        has = byte != 0
+        first = np.where(has, _FIRST_BIT[byte] + offsets, 2 * t)
+        last = np.where(has, _LAST_BIT[byte] + offsets, -t)
+    else:
+        has = u8.any(axis=1)
+        first = np.where(has, u8.argmax(axis=1).astype(np.int32) + offsets, 2 * t)
+        last = np.where(has, group - 1 - u8[:, ::-1].argmax(axis=1).astype(np.int32) + offsets, -t)
+    # prev_before[k]: last spike in groups < k; next_from[k]: first spike in groups >= k
+    prev_before = np.concatenate([np.full((1, h, w), -t, np.int32), np.maximum.accumulate(last, axis=0)])
+    next_from = np.concatenate([np.minimum.accumulate(first[::-1], axis=0)[::-1], np.full((1, h, w), 2 * t, np.int32)])
+    k = centres // group
+    return (1.0 / (next_from[k] - prev_before[k]).astype(np.float32)).astype(np.float32)
 
 
 def spike_representation(sample: Sample, kind: str) -> np.ndarray:

@@ -51,6 +51,24 @@ def test_interval_of_a_regular_train_is_its_period():
     assert np.allclose(rep[:16], 0.5) and np.allclose(rep[16:], 0.5)  # (1/4) / 0.5 both ways
 
 
+def brute_force_interval(planes, centres):
+    t = planes.shape[0]
+    idx = np.arange(t)[:, None, None]
+    out = []
+    for c in centres:
+        prev = np.where(planes[:c], idx[:c], -t).max(axis=0) if c > 0 else np.full(planes.shape[1:], -t)
+        nxt = np.where(planes[c:], idx[c:], 2 * t).min(axis=0)
+        out.append(1.0 / (nxt - prev))
+    return np.array(out, np.float32)
+
+
+@pytest.mark.parametrize("p", [0.002, 0.05, 0.5])
+@pytest.mark.parametrize("centres", [np.arange(16) * 16 + 8, np.array([0, 5, 100, 255])])
+def test_interval_matches_a_brute_force_search(p, centres, rng):
+    planes = rng.random((256, 5, 7)) < p
+    assert np.allclose(interval_rate(planes, centres), brute_force_interval(planes, centres))
+
+
 def test_contrast_representation_sums_to_threshold_times_net_polarity():
     s = make_sample()
     rep = event_representation(s, "contrast")
