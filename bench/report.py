@@ -334,9 +334,15 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
     """
     if spread not in ("std", "minmax"):
         raise ValueError(f"spread: expected 'std' or 'minmax', got {spread!r}")
+    from neuspike.formats.staging import check_writable_folder, remove_stale_temporaries
+
     inputs = load_inputs(results_dir)
     out = Path(out_dir) if out_dir is not None else Path(results_dir)
+    check_writable_folder(out, what="--out" if out_dir is not None else "results folder")  # before any work
     fig_dir, tab_dir = out / "figures", out / "tables"
+    for folder in (out, fig_dir, tab_dir):  # a killed report's temporaries (a half PDF can be 20 MB)
+        if folder.is_dir():
+            remove_stale_temporaries(folder)
     written: list[Path] = []
     figure_pages: list[Any] = []
     table_pages: list[Any] = []

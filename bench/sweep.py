@@ -327,6 +327,44 @@ def _time_split(frame: pd.DataFrame) -> dict[str, Any]:
     }
 
 
+def preflight(spec: SweepSpec) -> None:
+    """Refuse, before the first cell, a sweep whose cells cannot give results.
+
+    Checks every scene's size against the SSIM window and that its source image loads (a missing
+    photograph would otherwise fail every cell and report ``nan`` seconds per cell).
+
+    Raises
+    ------
+    InputError
+        One message naming the scene and the problem.
+    """
+    from neuspike.metrics import SSIM_WINDOW_SIDE
+    from neuspike.scenes import make_scene
+
+    for entry in spec.grid.scenes:
+        size = entry.spec.size
+        if size is not None and min(size) < SSIM_WINDOW_SIDE:
+            raise InputError(
+                f"size {size[0]}x{size[1]}: both sides must be at least {SSIM_WINDOW_SIDE} pixels, the side of "
+                f"the pinned SSIM window (scene {entry.name})"
+            )
+        try:
+            make_scene(entry.spec)
+        except NeuSpikeError as exc:
+            raise InputError(f"scene {entry.name}: {exc}") from None
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """Hidden ``.*.tmp`` files a killed run left in its own outputs (never in a shared cache)."""
+    from neuspike.formats.staging import remove_stale_temporaries
+
+    remove_stale_temporaries(out)
+    for folder in ("parts", "errors", "images"):
+        if (out / folder).is_dir():
+            for sub in [out / folder, *(p for p in (out / folder).rglob("*") if p.is_dir())]:
+                remove_stale_temporaries(sub)
+
+
 def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[str, Any]) -> None:
     """Write a cell's images in :mod:`bench.report`'s layout (nothing when that module is absent)."""
     if importlib.util.find_spec("bench.report") is None:
@@ -368,10 +406,12 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     ConfigMismatch
         ``out_dir`` holds results of a different sweep and ``execution.force`` is false.
     """
+    from neuspike.formats.staging import check_writable_folder
+
     t_start = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_writable_folder(out_dir, what="output folder")
     parts_dir, errors_dir = out / "parts", out / "errors"
+    preflight(spec)
 
     executor = execution.executor
     if isinstance(executor, str):
@@ -411,8 +451,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         for folder in (parts_dir, errors_dir, out / "images"):
             shutil.rmtree(folder, ignore_errors=True)
     parts_dir.mkdir(exist_ok=True)
-    for path in parts_dir.glob(".*.tmp"):  # left by a run killed while writing; never a result
-        path.unlink(missing_ok=True)
+    _remove_stale_temporaries(out)  # left by a run killed while writing; never a result
     wanted = set(ids)
     for path in parts_dir.glob("*.csv"):  # parts of an older harness version or of a forced rerun
         if path.stem not in wanted:
@@ -655,6 +694,9 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
         spec = spec_builder(args)
         execution = execution_from_args(args)
         out = Path(args.out or default_out)
+        from neuspike.formats.staging import check_writable_folder
+
+        check_writable_folder(out, what="--out")  # before any work; run_sweep checks the cells
         print(f"{spec.name} sweep: {len(spec.grid.cells())} cells x {len(spec.methods)} methods -> {out}",
               file=sys.stderr)
         outcome = run_sweep(spec, out, execution)

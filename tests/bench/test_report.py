@@ -150,6 +150,21 @@ def test_report_from_the_csv_alone_gives_identical_tables(built, tmp_path):
     assert not list((out / "figures").glob("grid_*"))  # no images/, no grid, nothing else changes
 
 
+def test_a_rerun_removes_a_killed_reports_temporaries_and_an_unwritable_out_is_one_line(built, tmp_path, capsys):
+    d, _, _ = built
+    bare = write_results(tmp_path / "bare", pd.read_csv(d / "results.csv"))
+    (bare / "figures").mkdir()
+    for stale in (bare / ".report.pdf.x1y2.tmp", bare / "figures" / ".light_affine.png.a8.tmp"):
+        stale.write_bytes(b"half written")  # what a killed report leaves
+    (bare / "keep.tmp").write_text("not ours: no leading dot")
+    assert report.main([str(bare)]) == 0
+    assert not list(bare.rglob(".*.tmp")) and (bare / "keep.tmp").exists()
+    (tmp_path / "file").write_text("x")
+    assert report.main([str(bare), "--out", str(tmp_path / "file" / "sub")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --out") and "cannot write there" in err[0]
+
+
 def test_report_refuses_a_folder_without_results(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothing to report"):
         report.build_report(tmp_path)

@@ -1,0 +1,34 @@
+"""Sweep command: requests that cannot give results are refused before the first cell."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from bench.sweep import main
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--size", "7x5"], r"size 7x5: both sides must be at least 11 pixels"),
+    (["--scenes", "pan:missing.png"], r"scene pan:missing.png: .*missing.png"),
+])
+def test_bad_requests_are_refused_before_any_cell_runs(tmp_path, capsys, args, message):
+    out = tmp_path / "run"
+    code = main(["--axis", "light", "--methods", "tfp-w32", "--lights", "1/4", "--seeds", "0",
+                 "--no-report", "--no-progress", "--out", str(out), *args])
+    err = capsys.readouterr().err
+    assert code == 2
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and re.search(message, lines[0]), err
+    assert not (out / "parts").exists() and not (out / "results.csv").exists()
+
+
+def test_an_unwritable_out_is_one_line_before_any_work(tmp_path, capsys):
+    (tmp_path / "file").write_text("x")
+    code = main(["--axis", "light", "--methods", "tfp-w32", "--no-report", "--no-progress",
+                 "--out", str(tmp_path / "file" / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err[-1].startswith("error: --out") and "cannot write there" in err[-1]
+    assert not any("sweep:" in line for line in err)  # nothing started
