@@ -309,7 +309,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if not args.method:
             raise InputError("give --method NAME (see --list) or --list")
-        run(spec_from_args(args))
+        spec = spec_from_args(args)
+        from neuspike.formats.staging import check_writable_folder
+
+        check_writable_folder(spec.out, what="--out")  # before computing anything
+        run(spec)
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

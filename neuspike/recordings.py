@@ -348,6 +348,18 @@ def load_sample(
                     f"{beside[0].name} beside the recording shows the key time "
                     f"{'(unknown)' if meta_key_s is None else f'{meta_key_s:.6f} s'}, not {key_time_s:.6f} s: not used"
                 )
+    from neuspike.metrics import SSIM_WINDOW_SIDE
+
+    if gt_path is not None and min(height, width) < SSIM_WINDOW_SIDE:  # type: ignore[type-var]
+        # no SSIM exists below the pinned window: refuse a ground truth asked for, skip one found beside
+        if gt is not None:
+            raise InputError(
+                f"ground truth {gt_path}: {width}x{height} is smaller than the {SSIM_WINDOW_SIDE}x{SSIM_WINDOW_SIDE} "
+                f"SSIM window, so no method could be scored; leave out --gt for no-reference measures"
+            )
+        notes.append(f"{gt_path.name} beside the recording not used: {width}x{height} is smaller than the "
+                     f"{SSIM_WINDOW_SIDE}x{SSIM_WINDOW_SIDE} SSIM window")
+        gt_path = None
     if gt_path is not None:
         ground_truth, gt_notes = load_ground_truth(gt_path, height=height, width=width)  # type: ignore[arg-type]
         notes.extend(gt_notes)

@@ -137,3 +137,35 @@ def test_a_killed_simulation_leaves_the_folder_entirely_old_or_entirely_new(tmp_
     assert _state(out) == states["new"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec", "ref"]  # the killed runs' leftovers are gone
     assert not list(out.rglob("*.tmp"))
+
+
+# --------------------------------------------------------------------------- commands refuse before working
+def test_commands_report_an_unwritable_out_in_one_line_before_any_work(tmp_path, capsys):
+    from neuspike import reconstruct, simulate
+    from neuspike.formats import write_spike_npz
+    from neuspike.streams import SpikeStream
+
+    (tmp_path / "file").write_text("x")
+    bad = str(tmp_path / "file" / "out")
+    assert simulate.main(["--size", "48x32", "--motion", "16", "--no-progress", "--out", bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --out") and "not a folder" in err[0]
+
+    spikes = write_spike_npz(tmp_path / "s.npz", SpikeStream(np.zeros((8, 16, 16), bool), gain=0.25))
+    assert reconstruct.main(["--method", "tfp-w8", "--spikes", str(spikes), "--out", bad]) == 2
+    captured = capsys.readouterr()
+    assert "sample:" not in captured.out  # nothing was loaded or computed
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --out") and "cannot write there" in err[0]
+
+
+def test_a_ground_truth_below_the_ssim_window_is_refused_before_any_method_runs(tmp_path):
+    from neuspike.formats import write_spike_npz
+    from neuspike.recordings import load_sample
+    from neuspike.streams import SpikeStream
+
+    spikes = write_spike_npz(tmp_path / "s.npz", SpikeStream(np.zeros((8, 8, 10), bool), gain=0.25))
+    np.save(tmp_path / "truth.npy", np.zeros((8, 10), np.float32))
+    with pytest.raises(InputError, match=r"10x8 is smaller than the 11x11 SSIM window"):
+        load_sample(spikes=spikes, gt=tmp_path / "truth.npy")
+    assert load_sample(spikes=spikes).ground_truth is None
