@@ -35,6 +35,8 @@ Arithmetic (float32, in this order, so that any implementation can be checked bi
 from __future__ import annotations
 
 import math
+import os
+import threading
 import time
 from typing import Any, Iterable
 
@@ -218,7 +220,8 @@ def integrate_and_fire(
     backend : {"auto", "numba", "numpy"}
         ``"numba"``: the fused compiled kernel on ``numba.get_num_threads()`` threads;
         ``"numpy"``: the plain NumPy plane loop; ``"auto"``: numba where it can be imported.
-        Same planes and charge, bit for bit.
+        Same planes and charge, bit for bit. (A process forked after the kernel ran takes the
+        NumPy path: threading runtimes cannot start in such a child.)
 
     Returns
     -------
@@ -247,7 +250,7 @@ def integrate_and_fire(
     hold = check_positive_int("hold_planes", hold_planes)
     light32 = _as_float32("light", check_positive("light", light))
     thr32 = _as_float32("threshold", check_positive("threshold", threshold))
-    engine = resolve_backend(backend)
+    engine = _runnable(resolve_backend(backend))
     if packed and (h * w) % 8:
         raise InputError(f"packed: H x W must be a multiple of 8 to pack planes, got {h} x {w}")
     if initial_charge is None:
@@ -268,6 +271,30 @@ def integrate_and_fire(
             "frames: the charge overflowed float32; a frame holds +inf radiance or light * radiance is too large"
         )
     return planes, charge
+
+
+# The compiled kernel's threads come from numba's threading layer. With GNU OpenMP (numba's "omp"
+# layer) a child forked after a parallel region ran cannot start one (the runtime terminates the
+# process), and numba's "workqueue" layer cannot take two parallel launches at once. So kernel calls
+# are serialised by a lock, and a process forked after a kernel ran takes the NumPy path (the same
+# planes). Spawned processes (the harness's pools) start clean and use the kernel.
+_KERNEL_LOCK = threading.Lock()
+_kernel_ran = False
+_forked_after_kernel = False
+
+
+def _note_fork() -> None:
+    global _forked_after_kernel
+    _forked_after_kernel = _forked_after_kernel or _kernel_ran
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_note_fork)
+
+
+def _runnable(engine: str) -> str:
+    """The backend that will actually run: ``"numpy"`` for ``"numba"`` in a child forked after a kernel ran."""
+    return "numpy" if engine == "numba" and _forked_after_kernel else engine
 
 
 #: Most pixels per band of the compiled kernel: a band's charge (4 bytes a pixel) stays in the L2
@@ -309,8 +336,11 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
         out = np.empty((k_frames * hold, h, w), np.bool_)
         kernel = spike_kernels.fire_planes
     negatives = np.zeros(-(-h // rows), np.int64)
+    global _kernel_ran
+    _kernel_ran = True
     if frames.dtype == np.float32:
-        kernel(np.ascontiguousarray(frames), hold, light, threshold, charge, dark, rows, out, negatives)
+        with _KERNEL_LOCK:
+            kernel(np.ascontiguousarray(frames), hold, light, threshold, charge, dark, rows, out, negatives)
     else:
         # other float types go through a small float32 buffer, a few frames at a time: the kernel
         # is compiled for float32 frames only, and no full-size copy is made
@@ -321,7 +351,8 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
             k1 = min(k_frames, k0 + step)
             chunk = staging[:k1 - k0]
             np.copyto(chunk, frames[k0:k1], casting="same_kind")
-            kernel(chunk, hold, light, threshold, charge, dark, rows, out[k0 * hold:k1 * hold], counts)
+            with _KERNEL_LOCK:
+                kernel(chunk, hold, light, threshold, charge, dark, rows, out[k0 * hold:k1 * hold], counts)
             negatives += counts
     # NaN and +inf cannot leave the charge, so a finite charge and no negative value mean valid input
     if negatives.any() or not np.isfinite(charge).all():
@@ -683,7 +714,7 @@ class SpikeCamera:
         stages.append({
             "name": "integrate_and_fire",
             "params": {"light": self._light, "threshold": self._threshold, "hold_planes": hold,
-                       "backend": self._backend},
+                       "backend": _runnable(self._backend)},
             "seconds": seconds,
         })
         self._charge = charge

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -189,6 +191,28 @@ def test_negative_zero_and_float64_underflow_are_accepted_like_the_numpy_path():
     (planes, charge), (ref, ref_charge) = both_backends(frames, hold_planes=3, light=1.0, threshold=0.5)
     np.testing.assert_array_equal(planes, ref)
     assert charge.tobytes() == ref_charge.tobytes()
+
+
+def _planes_in_child(frames, queue):
+    stream = SpikeCamera(frames.shape[2], frames.shape[1], light=0.7, rng=None).capture(frames, hold_planes=2)
+    queue.put((stream.planes.tobytes(), stream.meta["stages"][-1]["params"]["backend"]))
+
+
+@needs_numba
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform")
+def test_a_process_forked_after_the_kernel_ran_still_simulates():
+    import multiprocessing
+
+    frames = np.random.default_rng(3).random((6, 8, 16), dtype=np.float32)
+    parent = SpikeCamera(16, 8, light=0.7, rng=None).capture(frames, hold_planes=2)  # the kernel runs here
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_planes_in_child, args=(frames, queue))
+    child.start()
+    planes, backend = queue.get(timeout=60)
+    child.join(60)
+    assert child.exitcode == 0 and backend == "numpy"  # the threading runtime cannot start in it
+    assert planes == parent.planes.tobytes()
 
 
 def test_backend_names_are_checked():
