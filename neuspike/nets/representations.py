@@ -66,38 +66,64 @@ _FIRST_BIT = np.array([next((j for j in range(8) if b >> (7 - j) & 1), 0) for b 
 _LAST_BIT = np.array([next((j for j in range(7, -1, -1) if b >> (7 - j) & 1), 0) for b in range(256)], np.int32)
 
 
-def interval_rate(planes: np.ndarray, centres: np.ndarray, *, group: int | None = None) -> np.ndarray:
+def interval_rate(planes: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """``1 / ISI`` at each plane index of ``centres``: float32 (len(centres), H, W), spikes per plane.
 
     ISI at centre c is ``next(c) - prev(c)`` with ``prev`` the last spike plane < c and ``next`` the
     first spike plane >= c; missing sides count as a spike one window length (T) outside the window.
-    The planes are scanned in groups of ``group`` planes (default: the greatest common divisor of the
-    centres and T, so every centre lies on a group boundary): each group's first and last spike,
-    then running extremes over the groups.
+    One pass forward and one backward over groups of 8 planes (each group's planes packed into one
+    byte per pixel, its first and last spike read from a table) keep running extremes; the planes
+    between group boundaries are scanned one by one only for centres that are not on a boundary.
     """
     t, h, w = planes.shape
     centres = np.asarray(centres, dtype=np.int64)
-    if group is None:
-        group = int(np.gcd.reduce(np.concatenate([centres[centres > 0], [t]])))
-    n = t // group
-    u8 = np.ascontiguousarray(planes).view(np.uint8).reshape(n, group, h, w)
-    offsets = (np.arange(n, dtype=np.int32) * group)[:, None, None]
-    if group == 8:  # each group's 8 planes as one byte (plane 0 = most significant bit): table look-ups
-        byte = np.zeros((n, h, w), np.uint8)
-        for j in range(8):
-            byte |= u8[:, j] << np.uint8(7 - j)
-        has = byte != 0
-        first = np.where(has, _FIRST_BIT[byte] + offsets, 2 * t)
-        last = np.where(has, _LAST_BIT[byte] + offsets, -t)
-    else:
-        has = u8.any(axis=1)
-        first = np.where(has, u8.argmax(axis=1).astype(np.int32) + offsets, 2 * t)
-        last = np.where(has, group - 1 - u8[:, ::-1].argmax(axis=1).astype(np.int32) + offsets, -t)
-    # prev_before[k]: last spike in groups < k; next_from[k]: first spike in groups >= k
-    prev_before = np.concatenate([np.full((1, h, w), -t, np.int32), np.maximum.accumulate(last, axis=0)])
-    next_from = np.concatenate([np.minimum.accumulate(first[::-1], axis=0)[::-1], np.full((1, h, w), 2 * t, np.int32)])
-    k = centres // group
-    return (1.0 / (next_from[k] - prev_before[k]).astype(np.float32)).astype(np.float32)
+    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+    idx = np.int16
+    # prev(c): the last spike plane < c, for every centre, by a forward pass
+    prev = np.full((h, w), -t, idx)
+    prev_at: dict[int, np.ndarray] = {}
+    wanted = set(int(c) for c in centres)
+    plane = 0
+    while plane <= t:
+        if plane in wanted:
+            prev_at[plane] = prev.copy()
+        if plane == t:
+            break
+        if plane % 8 == 0 and plane + 8 <= t and not any(plane < c < plane + 8 for c in wanted):
+            byte = _pack8(u8, plane)
+            np.maximum(prev, np.where(byte != 0, _LAST_BIT[byte] + plane, -t).astype(idx), out=prev)
+            plane += 8
+        else:
+            prev[u8[plane] != 0] = plane
+            plane += 1
+    # next(c): the first spike plane >= c, by a backward pass
+    nxt = np.full((h, w), 2 * t, idx)
+    next_at: dict[int, np.ndarray] = {}
+    plane = t
+    while plane >= 0:
+        if plane in wanted:
+            next_at[plane] = nxt.copy()
+        if plane == 0:
+            break
+        if plane % 8 == 0 and plane - 8 >= 0 and not any(plane - 8 < c < plane for c in wanted):
+            byte = _pack8(u8, plane - 8)
+            np.minimum(nxt, np.where(byte != 0, _FIRST_BIT[byte] + plane - 8, 2 * t).astype(idx), out=nxt)
+            plane -= 8
+        else:
+            plane -= 1
+            nxt[u8[plane] != 0] = plane
+    out = np.empty((len(centres), h, w), np.float32)
+    for k, c in enumerate(centres):
+        np.divide(1.0, (next_at[int(c)] - prev_at[int(c)]).astype(np.float32), out=out[k])
+    return out
+
+
+def _pack8(u8: np.ndarray, start: int) -> np.ndarray:
+    """Planes ``start .. start + 7`` as one byte per pixel, plane ``start`` the most significant bit."""
+    byte = u8[start] << np.uint8(7)
+    for j in range(1, 8):
+        byte |= u8[start + j] << np.uint8(7 - j)
+    return byte
 
 
 def spike_representation(sample: Sample, kind: str) -> np.ndarray:
