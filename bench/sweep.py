@@ -565,6 +565,7 @@ plug-ins: --plugin MODULE (repeatable; a dotted module name or a path to a .py f
 NEUSPIKE_PLUGINS environment variable (comma-separated), names modules that register extra methods
 when imported (neuspike.methods.register). Every worker imports them, so your methods run on local
 worker processes and on Dask workers alike; the module must be importable there.
+Importing a plug-in runs its code with your permissions: name only files and modules you trust.
 
 outputs in --out: results.csv (one row per method, scene, condition, seed and metric),
 config.json, metadata.json, parts/ (one file per finished cell), errors/ (tracebacks), cache/
@@ -609,7 +610,8 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
                         "the suite's own trained weights ship with it and need no flag")
     g.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE in every worker to register extra methods (repeatable)")
+                   help="import MODULE (a module name or a .py path) in every worker to register extra "
+                   "methods (repeatable); this runs its code, so name only files you trust")
     r = parser.add_argument_group("how to run")
     r.add_argument("--out", help="output folder (default: runs/<sweep>, runs/<sweep>-full with --full)")
     r.add_argument("--executor", choices=EXECUTORS, default="local",
