@@ -6,6 +6,8 @@ Candidates (chosen by the ablation recorded in :mod:`neuspike.nets`):
 T_spike
     ``"counts"``: the 256-plane window in 32 groups of 8 consecutive planes; each channel is the
     group's spike count divided by (8 * gain), i.e. a radiance estimate per 0.4 ms (TFP over 8 planes).
+    Another window length T >= 32 is split into near-equal groups (rates per plane, so the scale is
+    the same).
     ``"counts_interval"``: 16 groups of 16 planes as above (16 channels) plus 16 channels of the
     interval estimate ``1 / (ISI * gain)`` at the 16 group centres, where ISI is the distance from the
     last spike before the centre to the first one at or after it (TFI); a side without a spike in the
@@ -26,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.errors import InputError
-from neuspike.representations import spike_bins, voxel_grid
+from neuspike.representations import voxel_grid
 from neuspike.sample import Sample
 
 __all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "SPIKE_REPRESENTATIONS", "event_representation",
@@ -56,9 +58,22 @@ def _planes(sample: Sample) -> np.ndarray:
     if sample.spikes is None:
         raise InputError("spike representation: the sample has no spikes")
     planes = sample.spikes.planes
-    if planes.shape[0] % CHANNELS:
-        raise InputError(f"spike representation: {planes.shape[0]} planes is not a multiple of {CHANNELS}")
+    if planes.shape[0] < CHANNELS:
+        raise InputError(f"spike representation: needs at least {CHANNELS} planes, got {planes.shape[0]}")
     return planes
+
+
+def _bin_rates(planes: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
+    """Spike rate (spikes per plane) in ``bins`` near-equal groups of planes, and the group edges.
+
+    With T a multiple of ``bins`` (256 planes) every group has T / bins planes; otherwise the edges
+    are ``round(k T / bins)`` (a real recording's 200 planes: groups of 12 or 13).
+    """
+    t = planes.shape[0]
+    edges = np.round(np.linspace(0, t, bins + 1)).astype(np.int64)
+    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).astype(np.uint8)
+    counts = np.add.reduceat(u8, edges[:-1], axis=0, dtype=np.uint16).astype(np.float32)
+    return counts / np.diff(edges).astype(np.float32)[:, None, None], edges
 
 
 # Index (0 = most significant) of the first and the last set bit of every byte value (0 for 0, unused).
@@ -130,14 +145,12 @@ def spike_representation(sample: Sample, kind: str) -> np.ndarray:
     """T_spike of ``sample``: float32 (32, H, W), radiance units (module docstring)."""
     planes = _planes(sample)
     gain, _ = spike_gain(sample)
-    t = planes.shape[0]
     if kind == "counts":
-        return spike_bins(planes, CHANNELS) / np.float32(t / CHANNELS * gain)
+        return _bin_rates(planes, CHANNELS)[0] / np.float32(gain)
     if kind == "counts_interval":
-        half = CHANNELS // 2
-        counts = spike_bins(planes, half) / np.float32(t / half * gain)
-        centres = (np.arange(half) * (t // half) + t // half // 2).astype(np.int64)
-        return np.concatenate([counts, interval_rate(planes, centres) / np.float32(gain)])
+        rates, edges = _bin_rates(planes, CHANNELS // 2)
+        centres = (edges[:-1] + edges[1:]) // 2
+        return np.concatenate([rates, interval_rate(planes, centres)]) / np.float32(gain)
     raise InputError(f"spike representation: expected one of {SPIKE_REPRESENTATIONS}, got {kind!r}")
 
 

@@ -84,6 +84,18 @@ def test_voxel_representation_is_normalised():
     assert rep.shape == (32, H, W) and abs(nz.mean()) < 1e-4 and abs(nz.std() - 1) < 1e-3
 
 
+@pytest.mark.parametrize("kind", ["counts", "counts_interval"])
+def test_a_window_of_another_length_keeps_the_radiance_scale(kind):
+    planes = np.zeros((200, H, W), bool)  # a real recording's 200 planes: groups of 12 or 13
+    planes[1::2] = True
+    s = Sample(height=H, width=W, key_time_s=0.005, window_start_s=0.0, window_end_s=0.01,
+               spikes=SpikeStream(planes=planes, plane_rate_hz=20_000.0, start_s=0.0, gain=0.5))
+    rep = spike_representation(s, kind)
+    assert rep.shape == (32, H, W)
+    # rate 1/2 over gain 1/2: 1 on average; a group of 6 or 7 planes holds 3 or 4 spikes
+    assert abs(rep.mean() - 1.0) < 0.02 and np.allclose(rep, 1.0, atol=0.15)
+
+
 def test_unknown_gain_is_estimated_from_the_data():
     known = spike_representation(make_sample(gain=0.5), "counts")
     estimated = spike_representation(make_sample(gain=None), "counts")
