@@ -661,6 +661,18 @@ def _run(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
     check_writable_folder(out.parent, what="--out: the folder")  # before any work, not after it
+    mode_wanted = args.mode or ("continuous" if args.video else "window")
+    if mode_wanted == "window" and isinstance(args.motion, int) and args.motion >= 1 and isinstance(args.planes, int) \
+            and args.planes >= 1 and args.planes % args.motion:
+        s_, t_ = args.motion, args.planes
+        plane_counts = sorted({n for n in ((t_ // s_) * s_, (t_ // s_ + 1) * s_) if n > 0})
+        motions = [d for d in range(1, t_ + 1) if t_ % d == 0]
+        near = sorted(motions, key=lambda d: (abs(d - s_), d))[:2]
+        raise InputError(
+            f"--planes {t_} is not a whole multiple of --motion {s_} (Algorithm 1 holds each of the S frames "
+            f"for T // S planes): use {' or '.join(f'--planes {n}' for n in plane_counts)}, or "
+            f"{' or '.join(f'--motion {d}' for d in sorted(near))}"
+        )
     modalities = _check_modalities(m.strip() for m in args.modalities.split(",") if m.strip())
     sensor = SensorConfig(planes=args.planes, plane_rate_hz=args.plane_rate, spike_threshold=args.threshold,
                           event_threshold=args.event_threshold)

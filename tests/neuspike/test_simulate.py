@@ -171,3 +171,15 @@ def test_sequence_is_streamed_in_chunks_and_nothing_is_half_written(tmp_path, mo
         write_sequence(scene, Condition(), out2, rng=np.random.default_rng(0), start_s=0.0, duration_s=700 / 20_000)
     assert not (out2 / "spikes.dat").exists() and not (out2 / "events.h5").exists()
     assert not (out2 / "meta.json").exists()
+
+
+@pytest.mark.parametrize("motion, planes, advice", [
+    (3, 256, "use --planes 255 or --planes 258, or --motion 2 or --motion 4"),
+    (512, 256, "use --planes 512, or --motion 128 or --motion 256"),
+])
+def test_a_motion_scale_that_does_not_fit_the_window_names_both_options(tmp_path, capsys, motion, planes, advice):
+    out = tmp_path / "m"
+    assert main(["--size", "48x32", "--motion", str(motion), "--planes", str(planes), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--planes {planes} is not a whole multiple of --motion {motion}" in err[0]
+    assert advice in err[0] and not out.exists()
