@@ -33,7 +33,7 @@ from matplotlib.table import Table  # noqa: E402
 
 from neuspike.atomic import write_with  # noqa: E402
 from bench.results import tfp_windows  # noqa: E402
-from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values,  # noqa: E402
+from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values, held_conditions,  # noqa: E402
                           method_families, method_order)
 
 PAGE_SIZE_IN = (11.69, 8.27)  # A4 landscape
@@ -155,8 +155,9 @@ def axis_figure(frame: pd.DataFrame, axis: str, metrics: Sequence[str] = ("psnr"
         ax.set_title(METRIC_LABELS.get(metric, metric))
         ax.grid(True, alpha=0.3)
     band = "mean ± 1 std" if spread == "std" else "mean, band = min..max"
+    held = held_conditions(frame, axis)
     fig.suptitle(f"Against the {AXIS_TITLES.get(axis, axis)}: {band} over scenes and seeds "
-                 f"(up to {n_max} per point)", fontsize=12)
+                 f"(up to {n_max} per point{', ' + held if held else ''})", fontsize=12)
     if handles:
         fig.legend([handles[m] for m in methods if m in handles], [m for m in methods if m in handles],
                    loc="center right", fontsize=9, frameon=False, title="method")

@@ -419,7 +419,7 @@ def _report_results(inputs: ReportInputs, f: pd.DataFrame, fig_dir: Path, tab_di
                 [[m, *[tb.fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric) for v in values]]
                  for m in wide.index],
                 f"{tb.METRIC_LABELS[metric]} against the {tb.AXIS_TITLES[axis]}",
-                note="Mean over scenes and seeds of the ok cells.")
+                note=f"Mean over scenes and seeds of the ok cells, {tb.held_conditions(f, axis) or 'one condition'}.")
         images_dir = inputs.folder / "images"
         if images_dir.is_dir():
             kinds_in_pdf: set[str] = set()

@@ -156,15 +156,55 @@ AXIS_TITLES: Mapping[str, str] = {"light": "light scale L", "motion": "motion sc
 # Aggregations
 # ----------------------------------------------------------------------------------------------
 
+#: The condition axes; comparing along one holds the others fixed.
+CONDITION_AXES = ("light", "motion", "noise")
+
+
+def comparable_rows(frame: pd.DataFrame, axis: str) -> pd.DataFrame:
+    """The rows that compare like with like along ``axis``.
+
+    Along one axis, the other condition axes must take the same values at every point: a folder
+    that merges sweeps (a light and a motion sweep at noise "none", a noise sweep at L = 1/4,
+    S = 128) would otherwise average "none" over every light and motion cell and put it beside
+    noise levels measured at one condition. Only the combinations of the other axes present at
+    every value of ``axis`` are kept (all rows, when nothing was merged).
+    """
+    others = [c for c in CONDITION_AXES if c != axis and c in frame.columns]
+    if not others or axis not in frame.columns or frame.empty:
+        return frame
+    keys = frame[others].astype(str).agg("|".join, axis=1)
+    common = None
+    for _, part in keys.groupby(frame[axis].astype(str), sort=False):
+        present = set(part)
+        common = present if common is None else common & present
+    return frame[keys.isin(common or set())]
+
+
+def held_conditions(frame: pd.DataFrame, axis: str) -> str:
+    """What each point along ``axis`` averages over, e.g. ``"at L = 1/4, S = 128, noise none"``."""
+    rows = comparable_rows(frame, axis)
+    parts = []
+    for other, name in (("light", "L"), ("motion", "S"), ("noise", "noise")):
+        if other == axis or other not in rows.columns:
+            continue
+        values = axis_values(rows, other)
+        shown = ", ".join(axis_label(other, v) for v in values)
+        sep = " " if other == "noise" else " = "
+        parts.append(f"{name}{sep}{shown}" if len(values) == 1 else f"{name} in {{{shown}}}")
+    return ("at " + ", ".join(parts)) if parts else ""
+
+
 def axis_summary(frame: pd.DataFrame, axis: str, metric: str) -> pd.DataFrame:
     """Mean and spread of ``metric`` per method and ``axis`` value over scenes and seeds.
+
+    Only rows that compare like with like enter (:func:`comparable_rows`).
 
     Returns
     -------
     DataFrame with columns ``method, <axis>, mean, std, min, max, n`` (``std`` is NaN for a single
     row), sorted by method order then axis value. Methods without an ok row are absent.
     """
-    rows = ok_rows(frame, metric)
+    rows = ok_rows(comparable_rows(frame, axis), metric)
     cols = ["method", axis, "mean", "std", "min", "max", "n"]
     if rows.empty:
         return pd.DataFrame(columns=cols)

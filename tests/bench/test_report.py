@@ -346,3 +346,19 @@ def test_spearman_against_known_values():
     assert cl.spearman([1, 2, 3], [5, 5, 5]) == 0.0
     # d = rank differences (0, 0, 1, -1): rho = 1 - 6 * 2 / (4 * 15)
     assert cl.spearman([1, 2, 3, 4], [1, 2, 4, 3]) == pytest.approx(1 - 12 / 60)
+
+
+def test_a_merged_folder_compares_noise_levels_at_one_condition_only():
+    """A light sweep at noise none merged with a noise sweep at L = 1/4: "none" is taken at L = 1/4."""
+    rows = []
+    for light in LIGHTS:  # the light sweep: noise none at every L, PSNR = 40 * L
+        rows.append(row("tfi", metric="psnr", value=40 * light, light=light, scene="pan:camera", seed=0))
+    for noise, loss in (("small", 1.0), ("high", 3.0)):  # the noise sweep at L = 1/4 only
+        rows.append(row("tfi", metric="psnr", value=40 * 0.25 - loss, light=0.25, scene="pan:camera", seed=0,
+                        noise=noise))
+    frame = rows_frame(rows)
+    wide = tb.axis_means(frame, "noise")
+    assert wide.loc["tfi"].to_dict() == pytest.approx({"none": 10.0, "small": 9.0, "high": 7.0})
+    assert tb.held_conditions(frame, "noise") == "at L = 1/4, S = 128"
+    # along light, the noise levels measured at one L only are left out, not mixed in
+    assert tb.axis_means(frame, "light").loc["tfi"].to_dict() == pytest.approx({v: 40 * v for v in LIGHTS})
