@@ -102,7 +102,8 @@ def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_flo
                 continue
             th_i = th
         else:
-            if not (d >= th_on[i] or d <= -th_off[i]):
+            # both compares, no short circuit: one branch per pixel, rarely taken
+            if not ((d >= th_on[i]) | (d <= -th_off[i])):
                 continue
             th_i = th_on[i] if d > 0 else th_off[i]
         active[n_active] = i
