@@ -82,6 +82,7 @@ from torch import nn
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
 from neuspike.learned import CLAMP, LearnedMethod
+from neuspike.methods import Method
 from neuspike.nn import ConvGRU, ResidualBlock
 from neuspike.representations import event_windows, voxel_grid
 from neuspike.sample import Sample
@@ -271,6 +272,9 @@ class FireNet(LearnedMethod):
         return FireNetModule()
 
     def load_weights(self, module: nn.Module, path: Path) -> None:
+        if path.suffix == ".safetensors":  # our own (firenet-sim), in the module's own names
+            self.layout = "safetensors"
+            return super().load_weights(module, path)
         mapped, self.layout = map_state_dict(load_torch_state(path))
         load_state_strict(module, mapped, f"{path} ({self.layout} layout)")
 
@@ -294,14 +298,49 @@ class FireNet(LearnedMethod):
         grid = np.asarray(grid, dtype=np.float32)
         if grid.ndim != 3 or grid.shape[0] != NUM_BINS:
             raise InputError(f"FireNet.step: expected a voxel grid of shape ({NUM_BINS}, H, W), got {grid.shape}")
-        if self._state is not None and tuple(self._state[0].shape[2:]) != tuple(grid.shape[1:]):
+        if self._state is not None and self._state_hw() != tuple(grid.shape[1:]):
             raise InputError(
-                f"FireNet.step: grid size {grid.shape[1:]} differs from the sequence's {tuple(self._state[0].shape[2:])}; "
+                f"FireNet.step: grid size {grid.shape[1:]} differs from the sequence's {self._state_hw()}; "
                 "call reset() between sequences"
             )
         out = self.run_step(self._grid_tensor(grid))
         image = out[0, 0].float().clamp(0.0, 1.0)
         return np.ascontiguousarray(image.cpu().numpy(), dtype=np.float32)
+
+    def _state_hw(self) -> tuple[int, int]:
+        """(H, W) of the sequence the recurrent state belongs to."""
+        return tuple(self._state[0].shape[2:])
+
+    @classmethod
+    def for_training(cls, name: str | None = None, **params: Any) -> "FireNet":
+        """The method with a fresh, untrained module and no weights file (what a trainer encodes and trains with).
+
+        ``params`` are the registry entry's (``normalize``, ...); the module stays float32 on the CPU in
+        train mode, ``weights_path`` is ``None``.
+        """
+        import inspect
+
+        defaults = {k: v.default for k, v in inspect.signature(FireNet.__init__).parameters.items()
+                    if v.kind is v.KEYWORD_ONLY and v.default is not v.empty}
+        self = cls.__new__(cls)
+        Method.__init__(self, name, precision="float32", **{**defaults, **params})
+        self.layout = None
+        self.device = torch.device("cpu")
+        self.weights_path = None
+        self.weights_sha256 = None
+        self.module = self.build_module()
+        self._state = None
+        return self
+
+    def windows(self, sample: Sample) -> list[tuple[int, int, float, float]]:
+        """The fixed-count windows :meth:`encode` steps through, as :func:`event_windows` gives them."""
+        h, w = sample.height, sample.width
+        events = sample.events
+        start = min(float(events.t_s[0]), sample.key_time_s) if len(events) else sample.key_time_s
+        events = events.between(start, sample.key_time_s)
+        per_window = max(1, int(round(self.params["events_per_pixel"] * h * w)))
+        return event_windows(events.t_s, events_per_window=per_window, end_s=sample.key_time_s,
+                             max_windows=self.params["max_windows"])
 
     @staticmethod
     def _grid_tensor(grid: np.ndarray) -> tuple[torch.Tensor]:
@@ -389,8 +428,11 @@ class FireNet(LearnedMethod):
 
 
 def register_methods(register) -> None:
-    """Add ``firenet`` and ``firenet-plus`` to the registry."""
+    """Add ``firenet``, ``firenet-plus`` and ``firenet-sim`` to the registry."""
     register("firenet", FireNet, params={"normalize": True}, weights="firenet.pt",
              description="FireNet (published weights), normalised 5-bin voxel grids, 0.35 events/pixel windows")
     register("firenet-plus", FireNet, params={"normalize": False}, weights="firenet_plus.pt",
              description="FireNet+ (published weights), raw 5-bin voxel grids, 0.35 events/pixel windows")
+    register("firenet-sim", FireNet, params={"normalize": True}, weights="firenet-sim.safetensors",
+             description="FireNet trained here on the simulator (python -m neuspike.train.sequences firenet-sim), "
+                         "normalised 5-bin voxel grids, 0.35 events/pixel windows")

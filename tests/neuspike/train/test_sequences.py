@@ -1,0 +1,189 @@
+"""Sequence training: exact flow against rendering, window/target alignment with the method's own
+encoding, batches and flips, determinism, the loss falling on a fixed batch, and resume."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from neuspike.conditions import Condition
+from neuspike.errors import InputError
+from neuspike.rng import derive_rng
+from neuspike.scenes import SceneSpec, make_scene
+from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.train.sequences import (
+    Cell,
+    DataSpec,
+    TrainSpec,
+    backward_flow,
+    build_shard,
+    load_shard,
+    make_batch,
+    run_sequence,
+    scene_time,
+    sequence_loss,
+    simulate_item,
+    train,
+    training_method,
+    warp,
+)
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+def _interior(a: np.ndarray, margin: int) -> np.ndarray:
+    return a[..., margin:-margin, margin:-margin]
+
+
+def test_backward_flow_of_a_pan_is_exact_for_whole_pixel_steps():
+    """A pan moving (3, -2) pixels: warping the earlier frame gives the later one exactly (no resampling)."""
+    t0, t1 = -0.0011, 0.0004
+    spec = SceneSpec("pan", image="brick", size=(64, 48), velocity_px_s=(3 / 0.0015, -2 / 0.0015))
+    f0, f1 = make_scene(spec).render(np.array([t0, t1]))
+    flow = backward_flow(spec, t0, t1)
+    np.testing.assert_allclose(flow[:, 5, 7], [-3.0, 2.0], atol=1e-5)
+    warped, _ = warp(torch.from_numpy(f0)[None, None], torch.from_numpy(flow)[None])
+    np.testing.assert_allclose(_interior(warped[0, 0].numpy(), 4), _interior(f1, 4), atol=1e-4)
+
+
+@pytest.mark.parametrize("spec", [
+    SceneSpec("pan", image="astronaut", size=(64, 48), velocity_px_s=(3100.0, -1200.0)),
+    SceneSpec("zoom", image="astronaut", size=(64, 48), zoom_rate_hz=-60.0, focus=(20.0, 30.0)),
+])
+def test_backward_flow_maps_the_later_frame_onto_the_earlier(spec):
+    """warp(render(t0), flow) equals render(t1) up to bilinear resampling error, far below the frames' change."""
+    scene = make_scene(spec)
+    t0, t1 = -0.0011, 0.0004
+    f0, f1 = scene.render(np.array([t0, t1]))
+    flow = torch.from_numpy(backward_flow(spec, t0, t1))[None]
+    warped, valid = warp(torch.from_numpy(f0)[None, None], flow)
+    warped = warped[0, 0].numpy()
+    assert valid.mean() > 0.8
+    err = np.abs(_interior(warped - f1, 8)).mean()
+    change = np.abs(_interior(f0 - f1, 8)).mean()
+    assert err < 0.25 * change, (err, change)
+
+
+def test_scene_time_maps_frames_and_the_key_instant():
+    cond, sensor = Condition(motion=64), SensorConfig()
+    hold = sensor.planes // cond.motion
+    k = np.array([0, 5, 63])
+    frame_sensor_t = (k + 0.5) * hold / sensor.plane_rate_hz
+    np.testing.assert_allclose(scene_time(frame_sensor_t, cond, sensor),
+                               (k - 31.5) / sensor.upsampled_rate_hz, rtol=0, atol=1e-15)
+    key = sensor.planes / (2 * sensor.plane_rate_hz)
+    assert abs(scene_time(np.array([key]), cond, sensor)[0]) < 1e-15
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    """A small pan cell and its item (simulated once for the module)."""
+    torch.set_num_threads(1)
+    data = DataSpec(size=40, windows=4, displacement_px=6.0)
+    cell = Cell(SceneSpec("pan", image="brick", size=(40, 40), velocity_px_s=(2500.0, 900.0)),
+                Condition(light=0.25, motion=128, noise="none"), SensorConfig(event_threshold=0.2), 7)
+    method = training_method("firenet-sim")
+    return data, cell, method, simulate_item(method, cell, data)
+
+
+def test_item_is_the_methods_own_encoding_with_targets_at_window_ends(tiny):
+    data, cell, method, item = tiny
+    assert item is not None
+    assert item.voxels.shape == (4, 5, 40, 40) and item.targets.shape == (4, 40, 40)
+    # the last target is the sample's own ground truth (the key instant)
+    sample = simulate_sample(cell.scene, cell.condition, sensor=cell.sensor, seed=cell.seed,
+                             modalities={"events"}, history_s=item_history(item, cell, data))
+    np.testing.assert_allclose(item.targets[-1].astype(np.float32), sample.ground_truth, atol=1e-3)
+    steps = method.encode(sample)[-4:]
+    np.testing.assert_allclose(item.voxels.astype(np.float32), np.stack([s[0][0].numpy() for s in steps]),
+                               atol=1e-2, rtol=1e-2)
+    # consecutive targets are related by the stored flow (pan: a translation)
+    warped, valid = warp(torch.from_numpy(item.targets[:-1].astype(np.float32))[:, None],
+                         torch.from_numpy(item.flow[1:].astype(np.float32)))
+    err = np.abs(_interior(warped[:, 0].numpy() - item.targets[1:].astype(np.float32), 6)).mean()
+    change = np.abs(_interior(item.targets[:-1].astype(np.float32) - item.targets[1:], 6)).mean()
+    assert err < 0.4 * change, (err, change)  # bilinear resampling of a fine texture; a wrong flow gives > change
+
+
+def item_history(item, cell, data):
+    from neuspike.train.sequences import _history_s
+
+    return _history_s(cell, data.displacement_px)  # the tiny cell fits on the first try (checked below)
+
+
+def test_same_seed_same_bytes(tiny):
+    data, cell, method, item = tiny
+    again = simulate_item(method, cell, data)
+    assert item.meta["events"] == again.meta["events"]
+    for a, b in ((item.voxels, again.voxels), (item.targets, again.targets), (item.flow, again.flow)):
+        assert a.tobytes() == b.tobytes()
+
+
+def test_test_photographs_are_refused():
+    with pytest.raises(InputError, match="test photographs"):
+        DataSpec(photos=("camera", "brick"))
+
+
+def test_flips_keep_the_flow_consistent(tiny):
+    """After any crop and flip, warping target k-1 with flow k still gives target k."""
+    _, _, _, item = tiny
+    shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        b = make_batch(shard, rng, batch=1, crop=32, length=3)
+        assert b["voxels"].shape == (3, 1, 5, 32, 32)
+        warped, _ = warp(b["targets"][:-1, 0], b["flow"][1:, 0])
+        err = (warped - b["targets"][1:, 0]).abs()[..., 5:-5, 5:-5].mean()
+        change = (b["targets"][:-1, 0] - b["targets"][1:, 0]).abs()[..., 5:-5, 5:-5].mean()
+        wrong, _ = warp(b["targets"][:-1, 0], -b["flow"][1:, 0])
+        err_wrong = (wrong - b["targets"][1:, 0]).abs()[..., 5:-5, 5:-5].mean()
+        assert err < 0.45 * change and err < 0.5 * err_wrong, (err, change, err_wrong)
+
+
+def test_loss_falls_on_a_fixed_batch(tiny):
+    """A few Adam steps on one batch reduce the sequence loss (FireNet-size module, float32)."""
+    _, _, method, item = tiny
+    torch.manual_seed(0)
+    module = type(method).for_training("firenet-sim", normalize=True).module.train()
+    spec = TrainSpec(method="firenet-sim", data=DataSpec(size=40, windows=4), crop=24, length=4, warmup=1,
+                     precision="float32")
+    shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
+    batch = make_batch(shard, np.random.default_rng(0), batch=1, crop=24, length=4)
+    opt = torch.optim.Adam(module.parameters(), lr=1e-2)
+    losses = []
+    for _ in range(10):
+        loss, parts = sequence_loss(run_sequence(module, batch["voxels"], precision="float32"), batch, spec)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert losses[-1] < 0.8 * losses[0], losses
+
+
+def test_resume_gives_the_same_weights_as_one_run(tmp_path):
+    """Two steps, stop, two more (resumed from the checkpoint) == four steps in one go: same data order, same bytes."""
+    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
+    spec = TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
+                     warmup=1, steps=4, val_every=2, checkpoint_every=1, precision="float32", lr_warmup_steps=1)
+    shards = tmp_path / "shards"
+    one = train(spec, run_dir=tmp_path / "one", shard_root=shards, export_dir=tmp_path / "w1", progress=False)
+    half = dataclasses.replace(spec, steps=2)
+    train(half, run_dir=tmp_path / "two-a", shard_root=shards, export_dir=None, progress=False)
+    (tmp_path / "two").mkdir()
+    import shutil
+
+    shutil.copy(tmp_path / "two-a" / "checkpoint.pt", tmp_path / "two" / "checkpoint.pt")
+    two = train(spec, run_dir=tmp_path / "two", shard_root=shards, export_dir=None, progress=False)
+    assert one["step"] == two["step"] == 4
+    a = torch.load(tmp_path / "one" / "checkpoint.pt", weights_only=True)["module"]
+    b = torch.load(tmp_path / "two" / "checkpoint.pt", weights_only=True)["module"]
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+    assert (tmp_path / "w1" / "firenet-sim.safetensors").is_file()
+    log = (tmp_path / "one" / "train_log.csv").read_text().splitlines()
+    assert len(log) == 5 and log[0].startswith("step,loss")
+    with pytest.raises(InputError, match="different spec"):
+        train(half, run_dir=tmp_path / "one", shard_root=shards, export_dir=None, progress=False)
