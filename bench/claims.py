@@ -1,6 +1,6 @@
 """The paper's statements about its Figures 3 and 4 and Table 3, checked against our numbers.
 
-Each claim (REFERENCE §1.3) is a small function over the long results DataFrame
+Each claim (from the paper's discussion of those figures and that table) is a small function over the long results DataFrame
 (:mod:`bench.results`) that returns ``(status, evidence)``: ``status`` is one of
 :data:`HOLDS`, :data:`FAILS` or :data:`UNCHECKED` ("cannot check": the axis or the methods the
 claim needs are not in the results), and ``evidence`` gives the numbers the verdict rests on.
@@ -364,12 +364,36 @@ CLAIMS: tuple[Claim, ...] = (
 )
 
 
+#: Fewer scene x seed cells than this behind a point, and a verdict is only indicative.
+MIN_CELLS_PER_POINT = 4
+
+
+def run_size_caveat(frame: pd.DataFrame) -> str:
+    """A warning when the results are too few to conclude from, else ``""``.
+
+    Counts the distinct (scene, seed) cells behind each condition (light, motion, noise) of the ok
+    PSNR rows; below :data:`MIN_CELLS_PER_POINT` at any condition the verdicts rest on too little.
+    """
+    rows = ok_rows(frame, "psnr")
+    if rows.empty:
+        return ""
+    conds = [c for c in ("light", "motion", "noise") if c in rows.columns]
+    cells = [c for c in ("scene", "seed") if c in rows.columns]
+    per_point = rows.drop_duplicates(conds + cells).groupby(conds, sort=False).size()
+    fewest = int(per_point.min()) if len(per_point) else 0
+    if fewest >= MIN_CELLS_PER_POINT:
+        return ""
+    return (f"Caution: some points average only {fewest} cell{'s' if fewest != 1 else ''} (scenes x seeds); "
+            f"below {MIN_CELLS_PER_POINT} a verdict is indicative, not a conclusion. Rerun with more scenes "
+            f"or seeds (--full) before drawing conclusions.")
+
+
 def evaluate_claims(frame: pd.DataFrame, claims: Sequence[Claim] = CLAIMS) -> pd.DataFrame:
     """Every claim's verdict: columns ``key, statement, test, status, evidence, figure`` (the figure
     that shows it, when the claim could be checked and has one).
 
     A claim function that raises is reported as ``cannot check`` with the exception, so that one
-    defect does not hide the other verdicts.
+    defect does not hide the other verdicts. ``attrs["caveat"]`` holds :func:`run_size_caveat`.
     """
     records = []
     for claim in claims:
@@ -382,7 +406,9 @@ def evaluate_claims(frame: pd.DataFrame, claims: Sequence[Claim] = CLAIMS) -> pd
         figure = f"figures/{claim.figure}_psnr_ssim.png" if claim.figure and status != UNCHECKED else ""
         records.append({"key": claim.key, "statement": claim.statement, "test": claim.test,
                         "status": status, "evidence": evidence, "figure": figure})
-    return pd.DataFrame(records, columns=["key", "statement", "test", "status", "evidence", "figure"])
+    verdicts = pd.DataFrame(records, columns=["key", "statement", "test", "status", "evidence", "figure"])
+    verdicts.attrs["caveat"] = run_size_caveat(frame)
+    return verdicts
 
 
 def claims_markdown(verdicts: pd.DataFrame) -> str:
@@ -390,6 +416,8 @@ def claims_markdown(verdicts: pd.DataFrame) -> str:
     lines = ["# The paper's claims against our numbers\n",
              "Statements of NeuSpike-Net (ICCV 2021) about its Figures 3 and 4 and Table 3, checked on "
              "these results. Numbers are mean PSNR in dB over scenes and seeds unless said otherwise.\n"]
+    if verdicts.attrs.get("caveat"):
+        lines.append(f"**{verdicts.attrs['caveat']}**\n")
     counts = verdicts["status"].value_counts()
     lines.append(", ".join(f"{int(counts.get(s, 0))} {s}" for s in STATUSES) + ".\n")
     for r in verdicts.itertuples():

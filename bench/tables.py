@@ -41,7 +41,7 @@ METRIC_LABELS: Mapping[str, str] = {
 FAMILIES: tuple[str, ...] = ("spike", "event", "fusion", "unknown")
 #: Order of the noise levels (the paper's Table 3 levels after ``none``).
 NOISE_ORDER: tuple[str, ...] = ("none", "small", "medium", "high")
-#: Table 3 of the paper (REFERENCE §1.3): noise level -> {method: (PSNR dB, SSIM)}.
+#: Table 3 of the paper (NeuSpike-Net, ICCV 2021): noise level -> {method: (PSNR dB, SSIM)}.
 PAPER_TABLE3: Mapping[str, Mapping[str, tuple[float, float]]] = {
     "small": {"E2VID": (14.76, 0.6463), "TFI": (21.76, 0.6911), "NeuSpike-Net": (26.07, 0.8578)},
     "medium": {"E2VID": (13.68, 0.5381), "TFI": (21.03, 0.6395), "NeuSpike-Net": (25.84, 0.8503)},
@@ -502,7 +502,7 @@ def accuracy_markdown(points: pd.DataFrame, note: str = "") -> str:
 
 #: The resolutions of the paper's Table 2, (width, height).
 TABLE2_RESOLUTIONS: tuple[tuple[int, int], ...] = ((240, 180), (346, 260), (400, 250), (640, 480))
-#: Table 2 of the paper (REFERENCE §1.3), ms per frame: "WxH" -> {(method, device): ms}.
+#: Table 2 of the paper (NeuSpike-Net, ICCV 2021), ms per frame: "WxH" -> {(method, device): ms}.
 PAPER_TABLE2: Mapping[str, Mapping[tuple[str, str], float]] = {
     "240x180": {("E2VID", "GPU"): 6.15, ("FireNet", "GPU"): 2.21, ("NeuSpike-Net", "GPU"): 10.31,
                 ("E2VID", "CPU"): 116.14, ("FireNet", "CPU"): 25.57, ("NeuSpike-Net", "CPU"): 68.35},
@@ -513,7 +513,7 @@ PAPER_TABLE2: Mapping[str, Mapping[tuple[str, str], float]] = {
     "640x480": {("E2VID", "GPU"): 28.46, ("FireNet", "GPU"): 10.25, ("NeuSpike-Net", "GPU"): 51.55,
                 ("E2VID", "CPU"): 630.41, ("FireNet", "CPU"): 210.6, ("NeuSpike-Net", "CPU"): 473.46},
 }
-#: Published parameter counts (REFERENCE §1.1).
+#: Published parameter counts (the paper's supplementary material).
 PAPER_PARAMETERS: Mapping[str, int] = {"E2VID": 10_700_000, "FireNet": 38_000, "NeuSpike-Net": 5_985_000}
 
 

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from bench import claims as cl
+from bench import figures as figs
 from bench import report
 from bench import tables as tb
 from bench.results import base_row, rows_frame, to_csv_text
@@ -362,3 +363,26 @@ def test_a_merged_folder_compares_noise_levels_at_one_condition_only():
     assert tb.held_conditions(frame, "noise") == "at L = 1/4, S = 128"
     # along light, the noise levels measured at one L only are left out, not mixed in
     assert tb.axis_means(frame, "light").loc["tfi"].to_dict() == pytest.approx({v: 40 * v for v in LIGHTS})
+
+
+def test_claims_say_when_the_run_is_too_small_to_conclude(built):
+    d, _, _ = built
+    full = cl.evaluate_claims(synthetic_results())  # 2 scenes x 2 seeds per point
+    assert full.attrs["caveat"] == ""
+    small = synthetic_results()
+    small = small[(small["scene"] == SCENES[0]) & (small["seed"] == SEEDS[0])]
+    verdicts = cl.evaluate_claims(small)
+    assert "only 1 cell (scenes x seeds)" in verdicts.attrs["caveat"]
+    text = cl.claims_markdown(verdicts)
+    assert verdicts.attrs["caveat"] in text and "REFERENCE" not in text
+    assert "Caution" not in (d / "tables" / "claims.md").read_text()
+
+
+def test_grid_rows_leave_room_for_long_method_names():
+    image = np.zeros((24, 40))
+    long_name = "fusion-complementary-with-a-longer-name"
+    fig = figs.recon_grid_figure({("gt", 1): image, (long_name, 1): image}, ["gt", long_name], [1], "motion", "t")
+    fig.canvas.draw()
+    label = fig.axes[1].yaxis.label.get_window_extent()
+    assert label.x0 >= 0, f"the row label starts {label.x0:.0f} px left of the figure"
+    figs.close_all([fig])
