@@ -220,7 +220,7 @@ def title_blocks(inputs: ReportInputs) -> list[tuple[str, str]]:
     cfg, meta = inputs.config, inputs.metadata
     sweep = cfg.get("sweep") if isinstance(cfg.get("sweep"), dict) else None
     timing_cfg = cfg.get("timing") if isinstance(cfg.get("timing"), dict) else None
-    blocks.append(("p", f"Results folder: {inputs.folder.resolve()}"))
+    blocks.append(("p", f"Results folder: {inputs.folder.resolve().name}/"))
     if inputs.results is not None:
         f = inputs.results
         blocks.append(("h", "What was run"))
@@ -307,7 +307,9 @@ def write_timing_tables(tables_dir: Path, timing: pd.DataFrame, metadata: dict[s
 def _accuracy_note(inputs: ReportInputs) -> str:
     if inputs.accuracy is not None:
         res = sorted({r for r in inputs.accuracy.get("resolution", pd.Series(dtype=str)).astype(str) if r not in ("", "nan")})
-        src = sorted({r for r in inputs.accuracy.get("results", pd.Series(dtype=str)).astype(str) if r not in ("", "nan")})
+        # the sweep folders by name: an absolute path says only where the machine that made it kept them
+        src = sorted({Path(r).name for r in inputs.accuracy.get("results", pd.Series(dtype=str)).astype(str)
+                      if r not in ("", "nan")})
         return (f"PSNR/SSIM: means of the sweep results in {', '.join(src) or '?'}; ms per frame: bench.timing at "
                 f"{', '.join(res) or '?'} (recurrent methods: per network step)")
     return ("PSNR/SSIM: means over every cell; ms per frame: median wall time of one reconstruct call in the sweep "
