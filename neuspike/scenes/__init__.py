@@ -25,14 +25,14 @@ from neuspike.scenes.radiance import luma_to_radiance
 from neuspike.scenes.sampling import mirror_index, sample_separable
 from neuspike.scenes.make import BUILDERS, make_scene
 from neuspike.scenes.scene import Scene, check_times
-from neuspike.scenes.spec import DEFAULT_FOLDER_FPS, DEFAULT_SIZE, KINDS, MAX_ZOOM_EXPONENT, SceneSpec
+from neuspike.scenes.spec import CROP_KINDS, DEFAULT_FOLDER_FPS, DEFAULT_SIZE, KINDS, MAX_ZOOM_EXPONENT, SceneSpec
 from neuspike.scenes.still import StillScene
 from neuspike.scenes.video import VideoScene, read_timestamps, read_video_source
 from neuspike.scenes.zoom import ZoomScene, zoom_coordinates
 
 __all__ = [
     "BUNDLED_PHOTOS", "DEFAULT_FOLDER_FPS", "DEFAULT_SIZE", "FAN_HUB_FRACTION", "FAN_TIP_FRACTION",
-    "IMAGE_SUFFIXES", "KINDS", "MAX_ZOOM_EXPONENT", "TEST_PHOTOS", "TRAIN_PHOTOS",
+    "CROP_KINDS", "IMAGE_SUFFIXES", "KINDS", "MAX_ZOOM_EXPONENT", "TEST_PHOTOS", "TRAIN_PHOTOS",
     "FanScene", "PanScene", "Scene", "SceneSpec", "StillScene", "VideoScene", "ZoomScene",
     "check_times", "cover", "cover_size", "fan_phase", "load_photo", "luma", "luma_to_radiance",
     "make_scene", "mirror_index", "pan_offsets", "read_image_file", "read_photo",

@@ -66,13 +66,14 @@ class FanScene(Scene):
         width, height = spec.size
         super().__init__(spec, width, height)
         plane, (x0, y0), self._source_hw = photo_plane(spec)
-        self._background = np.ascontiguousarray(plane[y0:y0 + height, x0:x0 + width])
+        (cx, cy), w, h = self.crop_xy, self.width, self.height  # the rendered window of the view
+        self._background = np.ascontiguousarray(plane[y0 + cy:y0 + cy + h, x0 + cx:x0 + cx + w])
         self._hub_xy = focus_of(spec, width, height)
         m = min(width, height)
         self.tip_radius_px = FAN_TIP_FRACTION * m
         self.hub_radius_px = FAN_HUB_FRACTION * m
-        dx = np.arange(width, dtype=np.float64)[None, :] - self._hub_xy[0]
-        dy = np.arange(height, dtype=np.float64)[:, None] - self._hub_xy[1]
+        dx = np.arange(cx, cx + w, dtype=np.float64)[None, :] - self._hub_xy[0]
+        dy = np.arange(cy, cy + h, dtype=np.float64)[:, None] - self._hub_xy[1]
         r = np.hypot(dx, dy)
         tip_cover = np.clip(0.5 + self.tip_radius_px - r, 0.0, 1.0)
         hub_cover = np.clip(0.5 + self.hub_radius_px - r, 0.0, 1.0)

@@ -5,7 +5,8 @@ pixel ``(x, y)`` shows the photograph at ``(x + x0 - vx t, y + y0 - vy t)``: the
 ``+v t``. The photograph is extended without bound by mirroring about its border pixels, which is
 continuous, so no seam appears inside the view at any time (past the photograph the view shows its
 mirror image). Sampling is bilinear with exact sub-pixel positions (see
-:mod:`neuspike.scenes.sampling`).
+:mod:`neuspike.scenes.sampling`). A ``crop`` renders only its window: the same integer offset is
+added after the position is split into pixel and fraction, so its pixels equal the full view's.
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ class PanScene(Scene):
 
     def _render(self, times_s: np.ndarray) -> np.ndarray:
         x0s, y0s = pan_offsets(times_s, self._origin, self.spec.velocity_px_s)
-        return sample_translated(self._extended, self._plane_hw, x0s, y0s, self.width, self.height)
+        return sample_translated(self._extended, self._plane_hw, x0s, y0s, self.width, self.height,
+                                 offset_px=self.crop_xy)
 
     def _details(self) -> dict[str, Any]:
         return {"source_hw": list(self._source_hw), "plane_hw": list(self._plane_hw),

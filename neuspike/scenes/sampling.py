@@ -14,6 +14,23 @@ import numpy as np
 
 from neuspike.errors import InputError
 
+try:  # numba is a dependency, but scenes must still render where it cannot be imported
+    from neuspike.scenes import sampling_kernels as _kernels
+except ImportError:  # pragma: no cover - exercised only without numba
+    _kernels = None
+
+#: Accepted values of the samplers' ``backend``: the compiled kernels, the NumPy reference, or numba
+#: where it can be imported (both give the same frames bit for bit).
+BACKENDS: tuple[str, ...] = ("auto", "numba", "numpy")
+
+
+def _compiled(backend: str) -> bool:
+    if backend not in BACKENDS:
+        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
+    if backend == "numba" and _kernels is None:
+        raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
+    return backend != "numpy" and _kernels is not None
+
 #: Largest sample coordinate (pixels) accepted: beyond it float64 loses sub-pixel precision.
 MAX_COORDINATE_PX: float = 2.0**40
 
@@ -55,7 +72,7 @@ def _split(coords: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
     return base.astype(np.int64), (coords - base).astype(np.float32)
 
 
-def sample_separable(plane: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+def sample_separable(plane: np.ndarray, xs: np.ndarray, ys: np.ndarray, *, backend: str = "auto") -> np.ndarray:
     """Bilinear samples of the mirror-extended ``plane`` on per-instant separable grids.
 
     Output pixel ``(t, i, j)`` is the plane's value at ``(x = xs[t, j], y = ys[t, i])``.
@@ -67,6 +84,9 @@ def sample_separable(plane: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.nd
         Sample columns in plane pixels (pixel centres at integers).
     ys : ndarray, float64, (T, H)
         Sample rows in plane pixels.
+    backend : {"auto", "numba", "numpy"}
+        The compiled kernel (:mod:`neuspike.scenes.sampling_kernels`) or the NumPy reference; the
+        same frames bit for bit.
 
     Returns
     -------
@@ -88,6 +108,9 @@ def sample_separable(plane: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.nd
     x0, x1 = mirror_index(bx, ws), mirror_index(bx + 1, ws)
     y0, y1 = mirror_index(by, hs), mirror_index(by + 1, hs)
     out = np.empty((xs.shape[0], ys.shape[1], xs.shape[1]), dtype=np.float32)
+    if _compiled(backend):
+        _kernels.sample_separable_frames(plane, x0, x1, fx, y0, y1, fy, out)
+        return out
     for t in range(out.shape[0]):
         wy = fy[t][:, None]
         rows = plane[y0[t]] * (1 - wy) + plane[y1[t]] * wy  # (H, Ws)
@@ -118,7 +141,8 @@ def mirror_extend(plane: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 def sample_translated(extended: np.ndarray, plane_hw: tuple[int, int], x0s: np.ndarray,
-                      y0s: np.ndarray, width: int, height: int) -> np.ndarray:
+                      y0s: np.ndarray, width: int, height: int, *, offset_px: tuple[int, int] = (0, 0),
+                      backend: str = "auto") -> np.ndarray:
     """Bilinear samples of translated views of a mirror-extended plane.
 
     Output pixel ``(t, i, j)`` is the plane's value at ``(x = x0s[t] + j, y = y0s[t] + i)``.
@@ -132,7 +156,14 @@ def sample_translated(extended: np.ndarray, plane_hw: tuple[int, int], x0s: np.n
     x0s, y0s : ndarray, float64, (T,)
         Plane position of each view's top-left pixel.
     width, height : int
-        View size.
+        View size (of the crop, with ``offset_px``).
+    offset_px : (int, int)
+        ``(x, y)`` whole pixels added to every position after it is split into pixel and fraction:
+        the window ``offset_px`` of a larger view, whose pixels equal that view's exactly. The
+        extension must cover the larger view (:func:`mirror_extend` with its size).
+    backend : {"auto", "numba", "numpy"}
+        The compiled kernel (:mod:`neuspike.scenes.sampling_kernels`) or the NumPy reference; the
+        same frames bit for bit.
 
     Returns
     -------
@@ -146,9 +177,12 @@ def sample_translated(extended: np.ndarray, plane_hw: tuple[int, int], x0s: np.n
     hs, ws = plane_hw
     bx, fx = _split(np.asarray(x0s, dtype=np.float64), "x")
     by, fy = _split(np.asarray(y0s, dtype=np.float64), "y")
-    ix = np.mod(bx, mirror_period(ws))
-    iy = np.mod(by, mirror_period(hs))
+    ix = np.mod(bx, mirror_period(ws)) + int(offset_px[0])
+    iy = np.mod(by, mirror_period(hs)) + int(offset_px[1])
     out = np.empty((bx.shape[0], height, width), dtype=np.float32)
+    if _compiled(backend):
+        _kernels.sample_translated_frames(np.ascontiguousarray(extended, dtype=np.float32), iy, ix, fy, fx, out)
+        return out
     e = extended
     for t in range(out.shape[0]):
         a, b = int(iy[t]), int(ix[t])

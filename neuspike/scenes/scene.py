@@ -52,13 +52,22 @@ class Scene:
     spec : SceneSpec
         What the scene was made from.
     width, height : int
-        View size in pixels.
+        Size of the rendered frames in pixels: the view, or its ``spec.crop``.
+    view_width, view_height : int
+        Size of the whole view (the crop's frame of reference).
+    crop_xy : (int, int)
+        Top-left of the rendered window in the view.
     """
 
     def __init__(self, spec: SceneSpec, width: int, height: int) -> None:
         self.spec = spec
-        self.width = int(width)
-        self.height = int(height)
+        self.view_width = int(width)
+        self.view_height = int(height)
+        crop = spec.crop
+        #: ``(x, y)`` of the rendered window in the view (``(0, 0)`` without a crop).
+        self.crop_xy = (0, 0) if crop is None else (int(crop[0]), int(crop[1]))
+        self.width = self.view_width if crop is None else int(crop[2])
+        self.height = self.view_height if crop is None else int(crop[3])
 
     def render(self, times_s: Any) -> np.ndarray:
         """Radiance of the view at each instant.
@@ -83,7 +92,9 @@ class Scene:
 
     def describe(self) -> dict[str, Any]:
         """JSON-serialisable description: kind, size, the spec's fields and derived facts."""
-        return {"kind": self.spec.kind, "width": self.width, "height": self.height,
+        crop = {} if self.spec.crop is None else {"view": [self.view_width, self.view_height],
+                                                   "crop_xy": list(self.crop_xy)}
+        return {"kind": self.spec.kind, "width": self.width, "height": self.height, **crop,
                 "spec": self.spec.as_dict(), **self._details()}
 
     def _render(self, times_s: np.ndarray) -> np.ndarray:

@@ -23,6 +23,9 @@ from neuspike.errors import InputError
 #: Every scene kind.
 KINDS: tuple[str, ...] = ("pan", "zoom", "fan", "still", "video", "dead_leaves")
 
+#: The kinds that render a ``crop`` of their view natively (only the crop's pixels are computed).
+CROP_KINDS: tuple[str, ...] = ("pan", "zoom", "fan", "still")
+
 #: The view size of the photograph kinds when ``size`` is not given: the Vidar sensor.
 DEFAULT_SIZE: tuple[int, int] = (400, 250)
 
@@ -72,6 +75,22 @@ def _size(value: Any) -> tuple[int, int]:
     if len(items) != 2:
         raise InputError(f"size: expected (width, height), got {len(items)} items: {value!r}")
     return _whole("size width", items[0], 1), _whole("size height", items[1], 1)
+
+
+def _crop(value: Any, kind: str, size: tuple[int, int] | None) -> tuple[int, int, int, int]:
+    if kind not in CROP_KINDS:
+        raise InputError(f"crop: only kinds {', '.join(CROP_KINDS)} render a crop, got kind {kind!r}")
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise InputError(f"crop: expected (x, y, width, height), got {value!r}") from None
+    if len(items) != 4:
+        raise InputError(f"crop: expected (x, y, width, height), got {len(items)} items: {value!r}")
+    x, y = _whole("crop x", items[0], 0), _whole("crop y", items[1], 0)
+    w, h = _whole("crop width", items[2], 1), _whole("crop height", items[3], 1)
+    if size is not None and (x + w > size[0] or y + h > size[1]):
+        raise InputError(f"crop: ({x}, {y}, {w}, {h}) does not lie inside the {size[0]}x{size[1]} view")
+    return x, y, w, h
 
 
 def _path(name: str, value: Any) -> str:
@@ -134,6 +153,11 @@ class SceneSpec:
         ``"video"`` only: with a factor ``U`` the time fraction between two real frames snaps to
         the nearest multiple of ``1 / U`` (the grid of ``U`` times the frame rate, anchored on
         every real frame); ``None`` = continuous interpolation.
+    crop : (int, int, int, int) or None
+        ``(x, y, width, height)``: render only this window of the view (pixels, inside ``size``),
+        e.g. a 128x128 training crop of a 400x250 scene; its pixels equal those of the full view
+        exactly, and only they are computed. ``None`` renders the whole view. Kinds
+        :data:`CROP_KINDS` only.
     effects : tuple of Effect
         Sensor effects this scene calls for (the simulators run them); no effect on rendering.
     seed : int
@@ -161,6 +185,7 @@ class SceneSpec:
     dynamic_range: float | None = None
     peak: float = 1.0
     upsample: int | None = None
+    crop: tuple[int, int, int, int] | None = None
     effects: tuple[Effect, ...] = field(default=())
     seed: int = 0
 
@@ -221,6 +246,8 @@ class SceneSpec:
         if peak <= 0:
             raise InputError(f"peak: expected a positive radiance, got {self.peak!r}")
         put(self, "peak", peak)
+        if self.crop is not None:
+            put(self, "crop", _crop(self.crop, self.kind, self.size))
         try:
             effects = tuple(self.effects)
         except TypeError:
@@ -239,7 +266,9 @@ class SceneSpec:
         """The fields as JSON-serialisable data (effects as dicts, pairs as lists)."""
         out = asdict(self)
         out["effects"] = [e.as_dict() for e in self.effects]
-        for key in ("size", "velocity_px_s", "focus"):
-            if out[key] is not None:
+        if out["crop"] is None:  # absent rather than null: the dict (and what is derived from it,
+            del out["crop"]      # cell seeds, cache keys) stays that of a spec without the field
+        for key in ("size", "velocity_px_s", "focus", "crop"):
+            if out.get(key) is not None:
                 out[key] = list(out[key])
         return out

@@ -23,7 +23,8 @@ class StillScene(Scene):
         width, height = spec.size
         super().__init__(spec, width, height)
         plane, (x0, y0), self._source_hw = photo_plane(spec)
-        self._frame = np.ascontiguousarray(plane[y0:y0 + height, x0:x0 + width])
+        x0, y0 = x0 + self.crop_xy[0], y0 + self.crop_xy[1]
+        self._frame = np.ascontiguousarray(plane[y0:y0 + self.height, x0:x0 + self.width])
 
     def _render(self, times_s: np.ndarray) -> np.ndarray:
         return np.repeat(self._frame[None], times_s.shape[0], axis=0)

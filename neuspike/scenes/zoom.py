@@ -77,8 +77,9 @@ class ZoomScene(Scene):
 
     def _render(self, times_s: np.ndarray) -> np.ndarray:
         xs, ys = zoom_coordinates(times_s, rate_hz=self.spec.zoom_rate_hz, focus=self._focus,
-                                  origin=self._origin, width=self.width, height=self.height)
-        return sample_separable(self._plane, xs, ys)
+                                  origin=self._origin, width=self.view_width, height=self.view_height)
+        (cx, cy), w, h = self.crop_xy, self.width, self.height
+        return sample_separable(self._plane, xs[:, cx:cx + w], ys[:, cy:cy + h])
 
     def _details(self) -> dict[str, Any]:
         return {"source_hw": list(self._source_hw), "plane_hw": list(self._plane.shape),
