@@ -8,7 +8,7 @@ of sensor time; per method the benchmark records
 
 ``frames_per_s``
     frames per second of the method's own time (reading and cutting the windows excluded: they are
-    shared by all methods and measured once, in the ``read-only`` reference row);
+    shared by all methods and measured once, in the ``read-only`` reference rows);
 ``real_time_factor``
     sensor seconds reconstructed per second of method time at that output rate
     (``frames_per_s / fps``; 1 = real time);
@@ -16,8 +16,9 @@ of sensor time; per method the benchmark records
     over the frames, against the ground truth (``data_range = 1``; flicker: RMS error of consecutive
     differences, see :mod:`neuspike.video.truth`).
 
-Reference rows, measured in the same run: ``read-only`` (the stream alone: reading spikes by plane
-range and events by time range and cutting each frame's sample, no method) and
+Reference rows, measured in the same run: ``read-only spikes`` and ``read-only events`` (the stream
+alone: reading spikes by plane range or events by time range and cutting each frame's sample, no
+method; a method reads only the modalities it needs) and
 ``tfp (single-frame calls)`` (TFP through :func:`neuspike.recordings.load_sample` once per frame,
 as ``python -m neuspike.reconstruct`` would: what streaming with shared windows saves).
 
@@ -142,11 +143,13 @@ def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder
     from neuspike.recordings import load_sample
     from neuspike.video import stream_samples
 
-    t0 = time.perf_counter()
-    n = sum(1 for _ in stream_samples(rec, times, event_history_s=spec.event_history_s))
-    read_s = time.perf_counter() - t0
-    rows = [_row(method=READ_ONLY, inputs="+".join(sorted(rec.modalities)), status="ok", frames=n, fps=spec.fps,
-                 method_s=read_s, frames_per_s=n / read_s, real_time_factor=n / read_s / spec.fps, error="")]
+    rows = []
+    for modality in sorted(rec.modalities):
+        t0 = time.perf_counter()
+        n = sum(1 for _ in stream_samples(rec, times, inputs={modality}, event_history_s=spec.event_history_s))
+        read_s = time.perf_counter() - t0
+        rows.append(_row(method=f"{READ_ONLY} {modality}", inputs=modality, status="ok", frames=n, fps=spec.fps,
+                         method_s=read_s, frames_per_s=n / read_s, real_time_factor=n / read_s / spec.fps, error=""))
     sub = times[np.linspace(0, len(times) - 1, min(spec.single_frame_frames, len(times))).round().astype(int)]
     tfp = create("tfp")
     t0 = time.perf_counter()
@@ -249,7 +252,7 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         f"{len(frame)} rows. Machine: {m.get('cpu_model') or '?'}, {m.get('usable_cpus')} usable CPUs, torch threads "
         f"{run_meta.get('torch_threads')}, load average {run_meta.get('load_average_start')} at the start and "
         f"{run_meta.get('load_average_end')} at the end; commit {run_meta.get('source', {}).get('commit', '?')}. "
-        "frames/s is the method's own time (reading excluded; see the read-only row); real-time factor = frames/s "
+        "frames/s is the method's own time (reading excluded; see the read-only rows); real-time factor = frames/s "
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"
         + (" --full" if spec.duration_s >= 1.0 else "") + "`.",
@@ -284,9 +287,8 @@ def plot(csv_path: Path, png_path: Path) -> Path:
         ax.scatter(r["frames_per_s"], r["mean_psnr_db"], marker=marker)
         ax.annotate(r["method"], (r["frames_per_s"], r["mean_psnr_db"]), fontsize=7, xytext=(4, 3),
                     textcoords="offset points")
-    read = frame[frame["method"] == READ_ONLY]
-    if len(read):
-        ax.axvline(float(read["frames_per_s"].iloc[0]), color="grey", ls="--", lw=1, label="read-only stream")
+    for r, ls in zip(frame[frame["method"].str.startswith(READ_ONLY)].to_dict("records"), ("--", ":")):
+        ax.axvline(float(r["frames_per_s"]), color="grey", ls=ls, lw=1, label=r["method"])
         ax.legend(fontsize=7)
     ax.set_xscale("log")
     ax.set_xlabel("frames per second of method time (log)")
