@@ -312,7 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         spec = spec_from_args(args)
         from neuspike.formats.staging import check_writable_folder
 
-        check_writable_folder(spec.out, what="--out")  # before computing anything
+        check_writable_folder(spec.out, what="--out", create=False)  # before computing anything
         run(spec)
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)

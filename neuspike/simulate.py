@@ -660,7 +660,7 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
-    check_writable_folder(out.parent, what="--out: the folder")  # before any work, not after it
+    check_writable_folder(out.parent, what="--out: the folder", create=False)  # before any work
     mode_wanted = args.mode or ("continuous" if args.video else "window")
     if mode_wanted == "window" and isinstance(args.motion, int) and args.motion >= 1 and isinstance(args.planes, int) \
             and args.planes >= 1 and args.planes % args.motion:

@@ -31,8 +31,11 @@ _AT_FDCWD = -100
 _RENAME_EXCHANGE = 2
 
 
-def check_writable_folder(folder: str | os.PathLike, *, what: str = "--out") -> Path:
+def check_writable_folder(folder: str | os.PathLike, *, what: str = "--out", create: bool = True) -> Path:
     """Create ``folder`` if needed and check that a file can be written in it.
+
+    With ``create=False`` nothing is created: the folder, or where it does not exist yet its
+    nearest existing parent, must take a file (a failed command leaves no empty folder behind).
 
     Returns
     -------
@@ -48,8 +51,14 @@ def check_writable_folder(folder: str | os.PathLike, *, what: str = "--out") -> 
     try:
         if out.exists() and not out.is_dir():
             raise InputError(f"{what} {out}: exists and is not a folder")
-        out.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(dir=out, prefix=".write-check.", suffix=".tmp")
+        if create:
+            out.mkdir(parents=True, exist_ok=True)
+        probe_dir = out
+        while not probe_dir.exists():
+            probe_dir = probe_dir.parent
+        if not probe_dir.is_dir():
+            raise InputError(f"{what} {out}: {probe_dir} is not a folder")
+        fd, probe = tempfile.mkstemp(dir=probe_dir, prefix=".write-check.", suffix=".tmp")
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:

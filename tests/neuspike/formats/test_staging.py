@@ -72,6 +72,10 @@ def test_unwritable_output_folders_are_one_line_input_errors(tmp_path):
         check_writable_folder(tmp_path / "file")
     with pytest.raises(InputError, match=r"cannot write there \(Not a directory\)"):
         check_writable_folder(tmp_path / "file" / "sub")
+    with pytest.raises(InputError, match=r"file is not a folder"):
+        check_writable_folder(tmp_path / "file" / "sub", create=False)
+    assert check_writable_folder(tmp_path / "later" / "deeper", create=False) == tmp_path / "later" / "deeper"
+    assert not (tmp_path / "later").exists()
     assert check_writable_folder(tmp_path / "new" / "deeper").is_dir()
     assert list((tmp_path / "new" / "deeper").iterdir()) == []  # the probe file is gone
 
@@ -156,7 +160,11 @@ def test_commands_report_an_unwritable_out_in_one_line_before_any_work(tmp_path,
     captured = capsys.readouterr()
     assert "sample:" not in captured.out  # nothing was loaded or computed
     err = captured.err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error: --out") and "cannot write there" in err[0]
+    assert len(err) == 1 and err[0].startswith("error: --out") and "is not a folder" in err[0]
+    assert not (tmp_path / "nothing").exists()
+    assert reconstruct.main(["--method", "no-such-method", "--spikes", str(spikes),
+                             "--out", str(tmp_path / "nothing" / "o")]) == 2
+    assert not (tmp_path / "nothing").exists()  # a failed command creates no folder
 
 
 def test_a_ground_truth_below_the_ssim_window_is_refused_before_any_method_runs(tmp_path):
