@@ -263,6 +263,21 @@ def _rates(
     return rate_r, rate_u
 
 
+def _decay_tables(n: int, d: float, big_f: float) -> tuple[np.ndarray, np.ndarray]:
+    """Decay factors ``exp(-lag / D)`` and ``exp(-lag / F)`` indexed by the lag in planes, for the
+    states after planes ``0 .. n - 1``.
+
+    A pixel that has not fired yet holds last = -(n + 1), so its first spike sees a lag in
+    [n + 1, 2n], where the tables hold 0: the update then maps the resting state (q = v = 0) onto
+    itself, and the first spike only starts the clock.
+    """
+    lags = np.arange(2 * n + 1, dtype=np.float64)
+    decay_r, decay_u = np.exp(-lags / d), np.exp(-lags / big_f)
+    decay_r[n + 1 :] = 0.0
+    decay_u[n + 1 :] = 0.0
+    return decay_r, decay_u
+
+
 def tfstp_state(
     planes: np.ndarray,
     key_plane: int,
@@ -299,14 +314,7 @@ def tfstp_state(
     h, w = planes.shape[1:]
     size = h * w
     flat = planes[:n].reshape(n, size)
-    # Decay factors indexed by the lag in planes. A pixel that has not fired yet holds
-    # last = -(n + 1), so its first spike sees a lag in [n + 1, 2n], where the tables hold 0: the
-    # update then maps the resting state (q = v = 0) onto itself, and the first spike only starts
-    # the clock.
-    lags = np.arange(2 * n + 1, dtype=np.float64)
-    decay_r, decay_u = np.exp(-lags / d), np.exp(-lags / big_f)
-    decay_r[n + 1 :] = 0.0
-    decay_u[n + 1 :] = 0.0
+    decay_r, decay_u = _decay_tables(n, d, big_f)
     if compiled:
         return _kernels.stp_states(np.ascontiguousarray(planes), n, decay_r, decay_u, u0, f)
     last = np.full(size, -(n + 1), dtype=np.int64)  # plane of each pixel's last spike
@@ -371,13 +379,16 @@ def tfstp_rate(
         to the key plane.
     """
     u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
-    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f,
-                       backend=backend)
-    if _resolve_backend(backend) == "numba":
-        rate, saturated = _kernels.stp_rate(q, v, u0, d, big_f, f, _TINY)
+    if _resolve_backend(backend) == "numba":  # states and read-out in one compiled pass
+        planes, key_plane = check_spike_window(planes, key_plane)
+        decay_r, decay_u = _decay_tables(key_plane + 1, d, big_f)
+        rate, saturated = _kernels.tfstp_rate_fused(np.ascontiguousarray(planes), key_plane + 1, decay_r, decay_u,
+                                                    u0, d, big_f, f, _TINY)
         if saturated:
             raise NeuSpikeError(_SATURATED)
         return rate
+    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f,
+                       backend=backend)
     rate_r, rate_u = _rates(q, v, u0, d, big_f, f)
     rate = rate_r + rate_u
     rate[(rate_r > 0) & (rate_u > 0)] *= 0.5  # the mean where both moved, else the one that did
