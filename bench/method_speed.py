@@ -367,6 +367,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
+        if args.out:
+            from neuspike.formats.staging import check_writable_folder
+
+            check_writable_folder(Path(args.out), what="--out")  # before measuring, not after
         weights = weights_dir_from_env(args.weights)
         if weights is not None and not weights.is_dir():
             raise InputError(f"weights folder {str(weights)!r} is not a folder")

@@ -465,7 +465,9 @@ def run(args: argparse.Namespace) -> Path:
     sizes = parse_sizes(args.sizes) if args.sizes else RESOLUTIONS
     names = method_names(args.methods)
     out = Path(args.out or ("runs/timing-full" if args.full else "runs/timing"))
-    out.mkdir(parents=True, exist_ok=True)
+    from neuspike.formats.staging import check_writable_folder
+
+    check_writable_folder(out, what="--out")  # before any measurement
 
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
