@@ -52,7 +52,7 @@ import numpy as np
 from neuspike.errors import InputError, NeuSpikeError
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
-           "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "error")
+           "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "error")
 READ_ONLY = "read-only"
 SINGLE_FRAME = "tfp (single-frame calls)"
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "reports" / "video" / "bench"
@@ -72,6 +72,9 @@ class VideoBenchSpec:
     seed: int = 0
     event_history_s: float = 1.0
     single_frame_frames: int = 10
+    #: torch intra-op threads, set again before every method (compiled kernels of other stages may
+    #: change the process's OpenMP thread count); ``None`` leaves torch's own choice
+    threads: int | None = None
 
 
 def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
@@ -108,6 +111,7 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
     from neuspike.video.truth import FlickerMeter, score_frame
 
     inputs = ""
+    _apply_threads(spec)
     try:
         inputs = "+".join(sorted(entry(name).inputs))
         method = create(name, weights_dir=weights_dir)
@@ -131,10 +135,23 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
                     mean_psnr_db=float(np.mean(psnrs)), mean_ssim=float(np.mean(ssims)),
                     mean_flicker_rmse=float(np.mean(flicks)) if flicks else None,
                     normalisation=method.last_normalisation,
-                    steps_per_frame=float(np.mean(steps)) if steps else None, error="")
+                    steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), error="")
     except Exception as exc:  # a failing method is a row with its error, not a crash of the benchmark
         return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps,
                     error=f"{type(exc).__name__}: {exc}")
+
+
+def _threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def _apply_threads(spec: VideoBenchSpec) -> None:
+    if spec.threads is not None:
+        import torch
+
+        torch.set_num_threads(spec.threads)
 
 
 def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder: Path) -> list[dict[str, Any]]:
@@ -143,13 +160,15 @@ def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder
     from neuspike.recordings import load_sample
     from neuspike.video import stream_samples
 
+    _apply_threads(spec)
     rows = []
     for modality in sorted(rec.modalities):
         t0 = time.perf_counter()
         n = sum(1 for _ in stream_samples(rec, times, inputs={modality}, event_history_s=spec.event_history_s))
         read_s = time.perf_counter() - t0
         rows.append(_row(method=f"{READ_ONLY} {modality}", inputs=modality, status="ok", frames=n, fps=spec.fps,
-                         method_s=read_s, frames_per_s=n / read_s, real_time_factor=n / read_s / spec.fps, error=""))
+                         method_s=read_s, frames_per_s=n / read_s, real_time_factor=n / read_s / spec.fps,
+                         threads=_threads(), error=""))
     sub = times[np.linspace(0, len(times) - 1, min(spec.single_frame_frames, len(times))).round().astype(int)]
     tfp = create("tfp")
     t0 = time.perf_counter()
@@ -159,7 +178,7 @@ def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder
     rows.append(_row(method=SINGLE_FRAME, inputs="spikes", status="ok", frames=len(sub), fps=spec.fps,
                      method_s=single_s, frames_per_s=len(sub) / single_s,
                      real_time_factor=len(sub) / single_s / spec.fps, normalisation=tfp.last_normalisation,
-                     error="reading included"))
+                     threads=_threads(), error="reading included"))
     return rows
 
 
@@ -178,6 +197,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
 
     out = check_writable(out)
     names = list(spec.methods) or [n for n in available()]
+    _apply_threads(spec)
     run_meta = collect(executor={"kind": "in-process"}, threads_per_worker=torch.get_num_threads(),
                        start=now_iso(), contended=False)
     load_start = _load_average()
@@ -250,21 +270,22 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         f"The fan at {spec.rpm:g} RPM, {spec.width}x{spec.height}, L = {spec.light:g}, simulated in continuous mode "
         f"({spec.duration_s:g} s of sensor time), streamed at {spec.fps:g} output frames per second of sensor time; "
         f"{len(frame)} rows. Machine: {m.get('cpu_model') or '?'}, {m.get('usable_cpus')} usable CPUs, torch threads "
-        f"{run_meta.get('torch_threads')}, load average {run_meta.get('load_average_start')} at the start and "
+        f"{spec.threads if spec.threads is not None else 'torch default'} (per row: threads), load average {run_meta.get('load_average_start')} at the start and "
         f"{run_meta.get('load_average_end')} at the end; commit {run_meta.get('source', {}).get('commit', '?')}. "
         "frames/s is the method's own time (reading excluded; see the read-only rows); real-time factor = frames/s "
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"
         + (" --full" if spec.duration_s >= 1.0 else "") + "`.",
         "",
-        "| method | inputs | frames/s | real-time factor | PSNR (dB) | SSIM | flicker | steps/frame | note |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| method | inputs | frames/s | real-time factor | PSNR (dB) | SSIM | flicker | steps/frame | threads | note |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in frame.to_dict("records"):
         lines.append(
             f"| {r['method']} | {r['inputs'] or ''} | {_fmt(r['frames_per_s'], '.1f')} | {_fmt(r['real_time_factor'], '.3g')} "
             f"| {_fmt(r['mean_psnr_db'], '.2f')} | {_fmt(r['mean_ssim'], '.3f')} | {_fmt(r['mean_flicker_rmse'], '.4f')} "
-            f"| {_fmt(r['steps_per_frame'], '.1f')} | {r['error'] if isinstance(r['error'], str) else ''} |"
+            f"| {_fmt(r['steps_per_frame'], '.1f')} | {_fmt(r['threads'], '.0f')} "
+            f"| {r['error'] if isinstance(r['error'], str) else ''} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -336,18 +357,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         from neuspike.weights import weights_dir_from_env
 
-        if args.threads is not None:
-            import torch
-
-            if args.threads < 1:
-                raise InputError(f"--threads must be >= 1, got {args.threads}")
-            torch.set_num_threads(args.threads)
+        if args.threads is not None and args.threads < 1:
+            raise InputError(f"--threads must be >= 1, got {args.threads}")
         duration = args.duration if args.duration is not None else (1.0 if args.full else 0.05)
         if not duration > 0:
             raise InputError(f"--duration must be positive, got {duration}")
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
-                              height=args.size[1], event_history_s=args.event_history)
+                              height=args.size[1], event_history_s=args.event_history, threads=args.threads)
         rows = run(spec, args.out, cache=args.cache, weights_dir=weights_dir_from_env(args.weights),
                    progress=not args.no_progress)
     except NeuSpikeError as exc:
