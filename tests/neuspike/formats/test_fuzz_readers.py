@@ -74,3 +74,31 @@ def test_a_decoder_crash_is_contained_in_its_child_process():
     path = FIXTURES / "aedat4-abort-171.aedat4"  # once aborted the interpreter ("panic in a destructor")
     with pytest.raises(FormatError, match="not a readable AEDAT4 file"):
         events_io._aedat4_decode(path, 0)
+
+
+def test_fuzzed_meta_json_beside_a_recording_gives_typed_errors_or_samples(tmp_path):
+    """``meta.json`` values of every wrong type: load_sample raises typed errors, never TypeError."""
+    from neuspike.errors import NeuSpikeError
+    from neuspike.formats import write_spike_npz
+    from neuspike.recordings import load_sample
+    from neuspike.streams import SpikeStream
+
+    rng = np.random.default_rng(5)
+    write_spike_npz(tmp_path / "s.npz", SpikeStream(rng.random((64, 16, 24)) < 0.2, gain=0.25))
+    good = {"width": 24, "height": 16, "plane_rate_hz": 20_000.0, "start_s": 0.0, "gain": 0.25, "threshold": 1.0,
+            "key_time_s": 0.0016, "mode": "window", "planes": 64, "event_threshold": 0.2}
+    odd = (None, "abc", [1, 2], {"a": 1}, -1, 0, 1.5, 1e300, float("nan"), True, "24", 10**30)
+    counts: collections.Counter[str] = collections.Counter()
+    for _ in range(150):
+        meta = dict(good)
+        for key in rng.choice(list(good), size=int(rng.integers(1, 4)), replace=False):
+            meta[str(key)] = odd[int(rng.integers(len(odd)))]
+        text = json.dumps(meta) if rng.random() < 0.9 else json.dumps(meta)[: int(rng.integers(1, 40))]
+        (tmp_path / "meta.json").write_text(text)
+        try:
+            load_sample(spikes=tmp_path / "s.npz")
+            counts["ok"] += 1
+        except NeuSpikeError as exc:
+            assert isinstance(exc, ValueError), f"{type(exc).__name__}: {exc} for {text}"
+            counts["typed"] += 1
+    assert counts["ok"] and counts["typed"], counts
