@@ -107,11 +107,15 @@ def _state(folder: Path) -> tuple:
             (folder / "events.h5").is_file())
 
 
-def _writing_started(out: Path, proc: subprocess.Popen, timeout_s: float = 120.0) -> float:
-    """Wait until the run creates its staging folder beside ``out``; return that instant."""
+def _stagings(out: Path) -> set[str]:
+    return {p.name for p in out.parent.glob(f".{out.name}.*.staging")}
+
+
+def _writing_started(out: Path, proc: subprocess.Popen, before: set[str], timeout_s: float = 120.0) -> float:
+    """Wait until the run creates a new staging folder beside ``out``; return that instant."""
     end = time.perf_counter() + timeout_s
     while time.perf_counter() < end and proc.poll() is None:
-        if any(out.parent.glob(f".{out.name}.*.staging")):
+        if _stagings(out) - before:
             return time.perf_counter()
         time.sleep(0.005)
     raise AssertionError(f"the run never started writing (status {proc.poll()})")
@@ -121,7 +125,7 @@ def test_a_killed_simulation_leaves_the_folder_entirely_old_or_entirely_new(tmp_
     out, ref = tmp_path / "rec", tmp_path / "ref"
     old = _simulate(out, seed=1)
     new = _simulate(ref, seed=2)
-    started = _writing_started(ref, new)
+    started = _writing_started(ref, new, set())
     assert new.wait(120) == 0 and old.wait(120) == 0, new.stderr.read().decode()
     write_s = time.perf_counter() - started  # simulating and writing, after the imports
     states = {"old": _state(out), "new": _state(ref)}
@@ -129,8 +133,9 @@ def test_a_killed_simulation_leaves_the_folder_entirely_old_or_entirely_new(tmp_
     (out / "notes.txt").write_text("the user's own file")
     # kill at random instants while the new run simulates and writes, up to just after it finished
     for delay in np.random.default_rng(13).uniform(0.0, 1.1, 2) * write_s:
+        before = _stagings(out)  # a killed run's staging folder stays until the next run finishes
         proc = _simulate(out, seed=2)
-        time.sleep(max(0.0, _writing_started(out, proc) + delay - time.perf_counter()))
+        time.sleep(max(0.0, _writing_started(out, proc, before) + delay - time.perf_counter()))
         proc.send_signal(signal.SIGKILL)
         proc.wait(30)
         now = _state(out)
