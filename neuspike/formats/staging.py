@@ -7,7 +7,8 @@ target (``.<name>.<id>.staging``) and swaps it in when complete: with ``renameat
 where the system has it (Linux, one atomic step), otherwise by two renames (a moment where the
 folder is absent, never mixed). Entries of the old folder that the run does not write (a user's own
 files) are carried over into the new one. A killed run's staging folders are removed by the next
-run into the same target, after giving back any such entries.
+run into the same target, after giving back any such entries. One run at a time per target: a
+second run started meanwhile removes the first one's staging folder as stale.
 
 :func:`check_writable_folder` tells, before any work, whether an output folder can be written.
 """
@@ -129,6 +130,8 @@ def staged_folder(out: str | os.PathLike, *, ours: Iterable[str]) -> Iterator[Pa
     On an exception inside the block the temporary folder is removed and ``out`` is untouched.
     """
     target = Path(out)
+    if target.is_symlink():  # replace the folder it points to, not the link
+        target = target.resolve()
     names = frozenset(ours)
     check_writable_folder(target.parent, what="output folder's parent")
     if target.exists() and not target.is_dir():

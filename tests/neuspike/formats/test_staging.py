@@ -182,3 +182,14 @@ def test_a_ground_truth_below_the_ssim_window_is_refused_before_any_method_runs(
     with pytest.raises(InputError, match=r"10x8 is smaller than the 11x11 SSIM window"):
         load_sample(spikes=spikes, gt=tmp_path / "truth.npy")
     assert load_sample(spikes=spikes).ground_truth is None
+
+
+def test_a_linked_output_folder_is_replaced_behind_its_link(tmp_path):
+    real = tmp_path / "real"
+    with staged_folder(real, ours=OURS) as staging:
+        _write_run(staging, "old")
+    (tmp_path / "link").symlink_to(real)
+    with staged_folder(tmp_path / "link", ours=OURS) as staging:
+        _write_run(staging, "new")
+    assert (tmp_path / "link").is_symlink() and (real / "a.bin").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
