@@ -340,6 +340,14 @@ def newest_results(candidates: Sequence[str | os.PathLike] = DEFAULT_RESULTS) ->
     return max(paths, key=lambda p: (p / "results.csv").stat().st_mtime_ns)
 
 
+def sweep_resolution(results: pd.DataFrame) -> tuple[int, int] | None:
+    """The (width, height) most of a sweep's rows were measured at (``None`` for no rows)."""
+    if not len(results):
+        return None
+    counts = results.groupby(["width", "height"]).size().sort_values(ascending=False, kind="mergesort")
+    return tuple(int(v) for v in counts.index[0])
+
+
 def join_accuracy(results: pd.DataFrame, timing: pd.DataFrame, source: str) -> pd.DataFrame:
     """Mean PSNR and SSIM per method from sweep ``results`` beside its ms per frame from ``timing``.
 
@@ -352,12 +360,7 @@ def join_accuracy(results: pd.DataFrame, timing: pd.DataFrame, source: str) -> p
     """
     summary = tb.method_summary(results)
     summary = summary[summary["cells_ok"] > 0]
-    sizes = results.drop_duplicates(["width", "height"])[["width", "height"]]
-    if len(sizes):
-        counts = results.groupby(["width", "height"]).size().sort_values(ascending=False, kind="mergesort")
-        sweep_w, sweep_h = (int(v) for v in counts.index[0])
-    else:
-        sweep_w = sweep_h = 0
+    sweep_w, sweep_h = sweep_resolution(results) or (0, 0)
     ok = timing[timing["status"] == "ok"]
     records = []
     for r in summary.itertuples():
@@ -469,6 +472,21 @@ def run(args: argparse.Namespace) -> Path:
 
     check_writable_folder(out, what="--out")  # before any measurement
 
+    results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
+    results = None
+    if results_dir is not None:
+        from bench.report import read_results
+
+        if not (results_dir / "results.csv").is_file():
+            raise InputError(f"--results: {results_dir} holds no results.csv")
+        results = read_results(results_dir / "results.csv")
+        sweep_size = sweep_resolution(results)
+        if sweep_size is not None and sweep_size not in sizes:
+            # time the methods at the sweep's own resolution too, so the chart pairs like with like
+            sizes = (*sizes, sweep_size)
+            print(f"also timing at the sweep's resolution {sweep_size[0]}x{sweep_size[1]}", file=sys.stderr)
+    load_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
@@ -483,18 +501,16 @@ def run(args: argparse.Namespace) -> Path:
                      weights_dir=weights, device=args.device,
                      log=lambda s: print(s, file=sys.stderr, flush=True))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
-    meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0}
+    load_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0,
+            "load_1min": {"before": load_before, "after": load_after},
+            "timing_contended": bool(max(load_before, load_after) > (os.cpu_count() or 1))}
     write_json(out / "metadata.json", meta)
     write_timing_tables(out / "tables", timing, meta)
 
-    results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
     acc_path = out / "accuracy_vs_time.csv"
-    if results_dir is not None:
-        from bench.report import read_results
-
-        if not (results_dir / "results.csv").is_file():
-            raise InputError(f"--results: {results_dir} holds no results.csv")
-        joined = join_accuracy(read_results(results_dir / "results.csv"), timing, str(results_dir))
+    if results is not None:
+        joined = join_accuracy(results, timing, str(results_dir))
         write_text(acc_path, tb.to_csv_text(joined))
         print(f"accuracy against time: sweep results from {results_dir}", file=sys.stderr)
     elif acc_path.exists():

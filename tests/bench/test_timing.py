@@ -3,6 +3,7 @@ accuracy-versus-time join, and the speed targets of bench.method_speed."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -202,6 +203,11 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
     assert "tt-unavailable (skipped): MethodUnavailable: weights not given (test)" in (out / "tables" / "timing.md").read_text()
     acc = pd.read_csv(out / "accuracy_vs_time.csv")
     assert acc["method"].tolist() == ["tt-mean"] and acc["psnr"].iloc[0] == 20.0
+    # times are paired with accuracy at the sweep's own resolution, timed in addition to --sizes
+    sweep_w, sweep_h = timing.sweep_resolution(results_for({"tt-mean": 20.0}))
+    assert acc["resolution"].iloc[0] == f"{sweep_w}x{sweep_h}"
+    assert {"32x24", f"{sweep_w}x{sweep_h}"} <= set(frame["resolution"])
+    assert set(json.loads((out / "metadata.json").read_text())["load_1min"]) == {"before", "after"}
     assert (out / "figures" / "accuracy_vs_time.png").exists() and (out / "report.pdf").read_bytes().startswith(b"%PDF")
     for name in ("config.json", "metadata.json"):
         assert (out / name).stat().st_size > 0
