@@ -10,16 +10,17 @@ a few float32 roundings (the tests state the tolerance). The series covers ``mot
 about 0.91 ISI or more (:func:`fits_exp_range`); :mod:`baselines.snm` takes the reference path
 otherwise.
 
-Two passes over bands of rows (``prange``; bands are independent within a pass):
+Two passes over each band of rows, all bands in one parallel region (``prange``):
 
 1. each pixel's motion marks per plane (a mark depends on the pixel's own spike train only), stored
-   as bits of a zero-padded uint8 array ``flags (T, H + 2, W + 2)``: bit 0 ``max(marked before,
-   marked after)``, bit 1 ``marked after``;
+   as bits of the band's own zero-padded uint8 array ``flags (T, rows + 2, W + 2)``: bit 0
+   ``max(marked before, marked after)``, bit 1 ``marked after``; the rows just above and below the
+   band are marked too (by both neighbouring bands), so no band waits for another;
 2. the 3x3 motion excitation (the OR of bit 0 over each pixel's neighbourhood, read from the padded
    array, so the border needs no special case), the refined current, the cut and the reconstruction
    neuron.
 
-Each band first tabulates, backwards in time, each plane's next spike and the ISI after it (the
+Each row first tabulates, backwards in time, each plane's next spike and the ISI after it (the
 reference's ``_next_spike_tables``), as float32 whole numbers in scratch of its own (exact up to
 2**24 planes).
 
@@ -96,26 +97,18 @@ def _marks_row(s_row, np_row, ni_row, f_row, a, last, has_prev, cnt, thr, j):
         cnt[x] = count + one if fired else count
 
 
-@njit(parallel=True, **_JIT)
-def _marks(spikes, thr, flags, count, first, band_rows):
-    """Pass 1: the motion-mark bits of every pixel and plane into ``flags`` (padded by one)."""
-    num_planes, height, width = spikes.shape
-    n_bands = (height + band_rows - 1) // band_rows
-    for band in prange(n_bands):
-        next_plane = np.empty((num_planes, width), dtype=np.float32)
-        next_isi = np.empty((num_planes, width), dtype=np.float32)
-        state = np.empty((4, width), dtype=np.float32)
-        for row in range(band * band_rows, min(height, (band + 1) * band_rows)):
-            _next_tables(spikes, row, next_plane, next_isi)
-            state[0, :] = 0.0   # a: the ISI that ended at the last spike (0: unknown)
-            state[1, :] = -1.0  # last: the last spike before plane j (-1: none)
-            state[2, :] = 0.0   # has_prev: [last >= 0]
-            state[3, :] = 0.0   # spikes so far
-            for j in range(num_planes):
-                _marks_row(spikes[j, row], next_plane[j], next_isi[j], flags[j, row + 1], state[0], state[1],
-                           state[2], state[3], thr, j)
-            count[row, :] = state[3]
-            first[row, :] = next_plane[0]
+@njit(**_JIT)
+def _row_marks(spikes, row, thr, flags, frow, next_plane, next_isi, state):
+    """The mark bits of image row ``row`` into ``flags[:, frow, 1:-1]``; returns nothing, leaves the
+    row's spike count in ``state[3]`` and its next-spike tables in ``next_plane``, ``next_isi``."""
+    _next_tables(spikes, row, next_plane, next_isi)
+    state[0, :] = 0.0   # a: the ISI that ended at the last spike (0: unknown)
+    state[1, :] = -1.0  # last: the last spike before plane j (-1: none)
+    state[2, :] = 0.0   # has_prev: [last >= 0]
+    state[3, :] = 0.0   # spikes so far
+    for j in range(spikes.shape[0]):
+        _marks_row(spikes[j, row], next_plane[j], next_isi[j], flags[j, frow], state[0], state[1], state[2],
+                   state[3], thr, j)
 
 
 #: Half-width of the argument range of :func:`_exp_near` (its accuracy holds within it).
@@ -240,45 +233,59 @@ def _after_row(j, s_row, np_row, ni_row, up, mid, down, a, last, has_prev, excit
         has_prev[x] = new_hp
 
 
+@njit(**_JIT)
+def _row_neurons(spikes, row, key_plane, flags, frow, thr, dynamic, lost, kept_floor, decay_still, neg_motion_rate,
+                 static_rate, exp_arg_centre, exp_of_centre, min_weight, next_plane, next_isi, st, charge_out,
+                 mass_out, excited_out):
+    """Excitation, refined current, cut and the two reconstruction neurons of image row ``row``,
+    whose marks are ``flags[:, frow]`` (the rows above and below at ``frow - 1``, ``frow + 1``)."""
+    num_planes, _, width = spikes.shape
+    _next_tables(spikes, row, next_plane, next_isi)
+    # a, last, has_prev, excited planes; charge and mass up to the key plane; after it; the weight
+    # of the plane after the key plane; the cut factor of the previous plane
+    st[0:8, :] = 0.0
+    st[1, :] = -1.0
+    st[8:10, :] = 1.0
+    for j in range(key_plane + 1):
+        _before_row(j, j == key_plane, spikes[j, row], next_plane[j], next_isi[j], flags[j, frow - 1],
+                    flags[j, frow], flags[j, frow + 1], st[0], st[1], st[2], st[3], st[4], st[5], st[9], thr,
+                    dynamic, lost, kept_floor, decay_still, neg_motion_rate, static_rate, exp_arg_centre,
+                    exp_of_centre)
+    for j in range(key_plane + 1, num_planes):
+        _after_row(j, spikes[j, row], next_plane[j], next_isi[j], flags[j, frow - 1], flags[j, frow],
+                   flags[j, frow + 1], st[0], st[1], st[2], st[3], st[6], st[7], st[8], st[9], thr, dynamic, lost,
+                   kept_floor, decay_still, neg_motion_rate, static_rate, exp_arg_centre, exp_of_centre, min_weight)
+    for x in range(width):
+        charge_out[row, x] = st[4, x] + st[6, x]
+        mass_out[row, x] = st[5, x] + st[7, x]
+        excited_out[row, x] = st[3, x]
+
+
 @njit(parallel=True, **_JIT)
-def _neurons(spikes, key_plane, flags, thr, dynamic, lost, kept_floor, decay_still, neg_motion_rate, static_rate,
-             exp_arg_centre, exp_of_centre, min_weight,
-             band_rows, charge_out, mass_out, excited_out):
-    """Pass 2: excitation, refined current, cut and the two reconstruction neurons, per pixel."""
+def _bands(spikes, key_plane, thr, dynamic, lost, kept_floor, decay_still, neg_motion_rate, static_rate,
+           exp_arg_centre, exp_of_centre, min_weight, band_rows, count, first, charge, mass, excited):
+    """Both passes, band by band in one parallel region: a band marks its rows and the row above
+    and below it (recomputed by both neighbours, so bands need no barrier between the passes) into
+    flags of its own, zero-padded, then runs the neurons of its rows."""
     num_planes, height, width = spikes.shape
     n_bands = (height + band_rows - 1) // band_rows
     for band in prange(n_bands):
+        r0 = band * band_rows
+        r1 = min(height, r0 + band_rows)
+        flags = np.zeros((num_planes, r1 - r0 + 2, width + 2), dtype=np.uint8)
         next_plane = np.empty((num_planes, width), dtype=np.float32)
         next_isi = np.empty((num_planes, width), dtype=np.float32)
         st = np.empty((10, width), dtype=np.float32)
-        for row in range(band * band_rows, min(height, (band + 1) * band_rows)):
-            _next_tables(spikes, row, next_plane, next_isi)
-            # a, last, has_prev, excited planes; charge and mass up to the key plane; after it;
-            # the weight of the plane after the key plane; the cut factor of the previous plane
-            st[0, :] = 0.0
-            st[1, :] = -1.0
-            st[2, :] = 0.0
-            st[3, :] = 0.0
-            st[4, :] = 0.0
-            st[5, :] = 0.0
-            st[6, :] = 0.0
-            st[7, :] = 0.0
-            st[8, :] = 1.0
-            st[9, :] = 1.0
-            for j in range(key_plane + 1):
-                _before_row(j, j == key_plane, spikes[j, row], next_plane[j], next_isi[j], flags[j, row],
-                            flags[j, row + 1], flags[j, row + 2], st[0], st[1], st[2], st[3], st[4], st[5], st[9],
-                            thr, dynamic, lost, kept_floor, decay_still, neg_motion_rate, static_rate, exp_arg_centre,
-                            exp_of_centre)
-            for j in range(key_plane + 1, num_planes):
-                _after_row(j, spikes[j, row], next_plane[j], next_isi[j], flags[j, row], flags[j, row + 1],
-                           flags[j, row + 2], st[0], st[1], st[2], st[3], st[6], st[7], st[8], st[9], thr, dynamic,
-                           lost, kept_floor, decay_still, neg_motion_rate, static_rate, exp_arg_centre, exp_of_centre,
-                           min_weight)
-            for x in range(width):
-                charge_out[row, x] = st[4, x] + st[6, x]
-                mass_out[row, x] = st[5, x] + st[7, x]
-                excited_out[row, x] = st[3, x]
+        for row in range(max(0, r0 - 1), min(height, r1 + 1)):
+            _row_marks(spikes, row, thr, flags, row - r0 + 1, next_plane, next_isi, st)
+            if r0 <= row < r1:
+                for x in range(width):
+                    count[row, x] = st[3, x]
+                    first[row, x] = next_plane[0, x]
+        for row in range(r0, r1):
+            _row_neurons(spikes, row, key_plane, flags, row - r0 + 1, thr, dynamic, lost, kept_floor, decay_still,
+                         neg_motion_rate, static_rate, exp_arg_centre, exp_of_centre, min_weight, next_plane,
+                         next_isi, st, charge, mass, excited)
 
 
 def fits_exp_range(motion_rate: float, num_planes: int) -> bool:
@@ -322,15 +329,13 @@ def snm_integrate(spikes: np.ndarray, key_plane: int, *, motion_threshold: float
         raise ValueError(f"motion_rate {motion_rate} spans more than the compiled exp's range")
     centre = 0.5 * (lo + hi)
     band_rows = max(1, -(-height // (4 * get_num_threads())))
-    flags = np.zeros((num_planes, height + 2, width + 2), dtype=np.uint8)
     count = np.empty((height, width), dtype=np.float32)
     first = np.empty((height, width), dtype=np.float32)
-    thr = np.float32(motion_threshold)
-    _marks(spikes, thr, flags, count, first, band_rows)
     charge = np.empty((height, width), dtype=np.float32)
     mass = np.empty((height, width), dtype=np.float32)
     excited = np.empty((height, width), dtype=np.float32)
-    _neurons(spikes, int(key_plane), flags, thr, bool(dynamic_refining), np.float32(lost_at_cut),
-             np.float32(1.0 - lost_at_cut), np.float32(decay_still), np.float32(-motion_rate), np.float32(static_rate),
-             np.float32(centre), np.float32(math.exp(centre)), np.float32(min_weight), band_rows, charge, mass, excited)
+    _bands(spikes, int(key_plane), np.float32(motion_threshold), bool(dynamic_refining), np.float32(lost_at_cut),
+           np.float32(1.0 - lost_at_cut), np.float32(decay_still), np.float32(-motion_rate), np.float32(static_rate),
+           np.float32(centre), np.float32(math.exp(centre)), np.float32(min_weight), band_rows, count, first, charge,
+           mass, excited)
     return charge, mass, count, first, excited
