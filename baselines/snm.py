@@ -123,6 +123,7 @@ from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method
+from neuspike.parallel import KERNEL_LOCK, parallel_usable
 from neuspike.sample import Sample
 
 __all__ = [
@@ -515,10 +516,11 @@ def _resolve_backend(backend: Any) -> str:
     if not isinstance(backend, str) or backend not in BACKENDS:
         raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if backend == "auto":
-        return "numba" if _kernels is not None else "torch"
+        return "numba" if _kernels is not None and parallel_usable() else "torch"
     if backend == "numba" and _kernels is None:
         raise InputError("backend 'numba': numba cannot be imported here; use backend='torch' or 'auto'")
-    return backend
+    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
+    return backend if parallel_usable() else "torch"
 
 
 def _still_decay(p: _Params) -> np.float32:
@@ -530,11 +532,12 @@ def _still_decay(p: _Params) -> np.float32:
 
 def _integrate_compiled(planes: np.ndarray, key_plane: int, p: _Params) -> SNMState:
     """:func:`_integrate` through the compiled kernel (``planes`` bool (T, H, W), validated inputs)."""
-    charge, mass, count, first, excited = _kernels.snm_integrate(
-        planes, key_plane, motion_threshold=p.motion_threshold, dynamic_refining=p.dynamic_refining,
-        lost_at_cut=-math.expm1(-p.step_forgetting), static_rate=1.0 / p.threshold_tau_planes,
-        motion_rate=1.0 / p.motion_memory_isi, decay_still=_still_decay(p), min_weight=_MIN_WEIGHT,
-    )
+    with KERNEL_LOCK:
+        charge, mass, count, first, excited = _kernels.snm_integrate(
+            planes, key_plane, motion_threshold=p.motion_threshold, dynamic_refining=p.dynamic_refining,
+            lost_at_cut=-math.expm1(-p.step_forgetting), static_rate=1.0 / p.threshold_tau_planes,
+            motion_rate=1.0 / p.motion_memory_isi, decay_still=_still_decay(p), min_weight=_MIN_WEIGHT,
+        )
     charge *= np.float32(THRESHOLD_STEP_MV)
     return SNMState(
         threshold_excess_mv=torch.from_numpy(charge), mass=torch.from_numpy(mass), count=torch.from_numpy(count),

@@ -67,6 +67,7 @@ from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
+from neuspike.parallel import KERNEL_LOCK, parallel_usable
 from neuspike.sample import Sample
 
 U0 = 0.15
@@ -119,10 +120,11 @@ def _resolve_backend(backend: Any) -> str:
     if not isinstance(backend, str) or backend not in BACKENDS:
         raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if backend == "auto":
-        return "numba" if _kernels is not None else "numpy"
+        return "numba" if _kernels is not None and parallel_usable() else "numpy"
     if backend == "numba" and _kernels is None:
         raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
-    return backend
+    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
+    return backend if parallel_usable() else "numpy"
 
 
 def _step_inplace(
@@ -316,7 +318,8 @@ def tfstp_state(
     flat = planes[:n].reshape(n, size)
     decay_r, decay_u = _decay_tables(n, d, big_f)
     if compiled:
-        return _kernels.stp_states(np.ascontiguousarray(planes), n, decay_r, decay_u, u0, f)
+        with KERNEL_LOCK:
+            return _kernels.stp_states(np.ascontiguousarray(planes), n, decay_r, decay_u, u0, f)
     last = np.full(size, -(n + 1), dtype=np.int64)  # plane of each pixel's last spike
     q = np.zeros(size)
     v = np.zeros(size)
@@ -382,8 +385,9 @@ def tfstp_rate(
     if _resolve_backend(backend) == "numba":  # states and read-out in one compiled pass
         planes, key_plane = check_spike_window(planes, key_plane)
         decay_r, decay_u = _decay_tables(key_plane + 1, d, big_f)
-        rate, saturated = _kernels.tfstp_rate_fused(np.ascontiguousarray(planes), key_plane + 1, decay_r, decay_u,
-                                                    u0, d, big_f, f, _TINY)
+        with KERNEL_LOCK:
+            rate, saturated = _kernels.tfstp_rate_fused(np.ascontiguousarray(planes), key_plane + 1, decay_r,
+                                                        decay_u, u0, d, big_f, f, _TINY)
         if saturated:
             raise NeuSpikeError(_SATURATED)
         return rate

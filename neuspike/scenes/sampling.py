@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.errors import InputError
+from neuspike.parallel import KERNEL_LOCK, parallel_usable
 
 try:  # numba is a dependency, but scenes must still render where it cannot be imported
     from neuspike.scenes import sampling_kernels as _kernels
@@ -29,7 +30,8 @@ def _compiled(backend: str) -> bool:
         raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
     if backend == "numba" and _kernels is None:
         raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
-    return backend != "numpy" and _kernels is not None
+    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
+    return backend != "numpy" and _kernels is not None and parallel_usable()
 
 #: Largest sample coordinate (pixels) accepted: beyond it float64 loses sub-pixel precision.
 MAX_COORDINATE_PX: float = 2.0**40
@@ -109,7 +111,8 @@ def sample_separable(plane: np.ndarray, xs: np.ndarray, ys: np.ndarray, *, backe
     y0, y1 = mirror_index(by, hs), mirror_index(by + 1, hs)
     out = np.empty((xs.shape[0], ys.shape[1], xs.shape[1]), dtype=np.float32)
     if _compiled(backend):
-        _kernels.sample_separable_frames(plane, x0, x1, fx, y0, y1, fy, out)
+        with KERNEL_LOCK:
+            _kernels.sample_separable_frames(plane, x0, x1, fx, y0, y1, fy, out)
         return out
     for t in range(out.shape[0]):
         wy = fy[t][:, None]
@@ -181,7 +184,8 @@ def sample_translated(extended: np.ndarray, plane_hw: tuple[int, int], x0s: np.n
     iy = np.mod(by, mirror_period(hs)) + int(offset_px[1])
     out = np.empty((bx.shape[0], height, width), dtype=np.float32)
     if _compiled(backend):
-        _kernels.sample_translated_frames(np.ascontiguousarray(extended, dtype=np.float32), iy, ix, fy, fx, out)
+        with KERNEL_LOCK:
+            _kernels.sample_translated_frames(np.ascontiguousarray(extended, dtype=np.float32), iy, ix, fy, fx, out)
         return out
     e = extended
     for t in range(out.shape[0]):
