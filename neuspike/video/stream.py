@@ -242,7 +242,7 @@ class VideoRecording:
             return self.start_s, self.start_s + self.num_planes / self.plane_rate_hz
         if self.event_count == 0:
             raise InputError(f"event file {self.events_path}: holds no events")
-        return self._events.time_of(0), self._events.time_of(self.event_count - 1)
+        return self.event_time(0), self.event_time(self.event_count - 1)
 
     def default_window_planes(self) -> int:
         """The file's length for a simulated window recording, else :data:`DEFAULT_WINDOW_PLANES`."""
@@ -267,6 +267,10 @@ class VideoRecording:
     def event_index(self, t_s: float) -> int:
         """Index of the first event at or after ``t_s``."""
         return self._events.index(t_s)
+
+    def event_time(self, i: int) -> float:
+        """Timestamp of event ``i``, seconds."""
+        return self._events.time_of(i)
 
     def read_events(self, i0: int, i1: int) -> EventStream:
         """Events ``[i0, i1)`` of the event file."""
@@ -572,7 +576,7 @@ class _EventBuffer:
         if t0 < self.t0:
             self._restart(self.rec.event_index(t0))
         self.e0 += int(np.searchsorted(self.arrays["t_s"][self.e0:self.ea], t0, side="left"))
-        if self.e0 == self.ea and self.ia < count and self.rec._events.time_of(self.ia) < t0:
+        if self.e0 == self.ea and self.ia < count and self.rec.event_time(self.ia) < t0:
             self._restart(self.rec.event_index(t0))  # a jump forward: skip the events in between
         while self.ia < count and (self.ea == self.e0 or self.arrays["t_s"][self.ea - 1] < t1):
             self._append(self.rec.read_events(self.ia, min(count, self.ia + EVENT_BLOCK)))
