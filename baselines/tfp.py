@@ -134,10 +134,39 @@ class TFP(Method):
         self.window = window
         self.last_window: tuple[int, int] | None = None
 
+    def reset(self) -> None:
+        """Forget the previous frame's count (streaming)."""
+        self._previous = None
+
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
+        """Streaming (:mod:`neuspike.video`): the previous frame's count, plus the planes that entered
+        the window, minus those that left it. Counts are integers, so the image is the one
+        :meth:`reconstruct` gives; a window that does not overlap the previous one going forward, or
+        moved by more than half its length, is counted afresh. The previous sample's planes must be
+        unchanged (the video stream hands out read-only views).
+        """
+        self._sliding = True
+        try:
+            return self.reconstruct(sample)
+        finally:
+            self._sliding = False
+
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
         start, stop = tfp_window(stream.num_planes, sample.key_plane, self.window)
-        rate = _window_rate(stream.planes, start, stop)
+        base = round(stream.start_s * stream.plane_rate_hz)  # recording plane of stream.planes[0]
+        a0, a1 = base + start, base + stop
+        prev = getattr(self, "_previous", None) if getattr(self, "_sliding", False) else None
+        if (prev is not None and prev[4] == stream.plane_rate_hz and prev[0].shape[1:] == stream.planes.shape[1:]
+                and prev[2] <= a0 < prev[3] <= a1 and 2 * ((a0 - prev[2]) + (a1 - prev[3])) < a1 - a0):
+            planes0, base0, p0, p1, _, count = prev
+            count = count.astype(np.int32)
+            count -= spike_count(planes0[p0 - base0:a0 - base0])
+            count += spike_count(stream.planes[p1 - base:a1 - base])
+        else:
+            count = spike_count(stream.planes[start:stop])
+        self._previous = (stream.planes, base, a0, a1, stream.plane_rate_hz, count)
+        rate = count * (1.0 / (stop - start))  # as _window_rate computes it
         self.last_window = (start, stop)
         return rate_to_image(rate, stream.gain)
 
