@@ -314,3 +314,16 @@ def test_firenet_carries_its_state_between_frames(tmp_path, one_torch_thread):
                 else:
                     assert ssim(img, ref, data_range=1.0) > 0.9
             previous = t
+
+
+@pytest.mark.parametrize("name", ["tfp", "tfp-w32"])
+def test_tfp_sliding_count_equals_a_full_count(recording, name):
+    """At one frame per plane (and every 10 planes) TFP updates its count by the planes entering and
+    leaving the window; every frame equals the single-frame reconstruction."""
+    folder, _ = recording
+    spikes = folder / "spikes.dat"
+    times = np.concatenate([frame_times(0.006, 0.0085, RATE), frame_times(0.0085, 0.02, 2000)])
+    with open_recording(spikes=spikes, height=H, width=W) as rec:
+        got = list(reconstruct_video(registry.create(name), rec, times))
+    for t, img in got[::3]:
+        assert np.array_equal(img, _single(name, spikes, None, t, height=H, width=W)), t
