@@ -19,7 +19,7 @@ from neuspike.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
 from neuspike.nets.network import NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
-                                           spike_representation)
+                                           spike_gain, spike_representation)
 from neuspike.sample import Sample
 from neuspike.weights import load_safetensors, load_state_strict, read_card
 
@@ -111,6 +111,12 @@ class NeuSpikeNetMethod(LearnedMethod):
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         return [self.encode_sample(sample, self.params)]
+
+    def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
+        image, label = super()._reconstruct(sample)
+        if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
+            label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
+        return image, label
 
     def load_weights(self, module: nn.Module, path: Path) -> None:
         card = read_card(path)

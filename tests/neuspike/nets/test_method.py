@@ -125,6 +125,10 @@ def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_
         image = method.reconstruct(make_sample())
         assert image.shape == (H, W) and image.dtype == np.float32
         assert 0.0 <= image.min() and image.max() <= 1.0
+        assert method.last_normalisation == "clamp"
+    spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
+    spike.reconstruct(make_sample(gain=None))
+    assert "gain estimated" in spike.last_normalisation
 
 
 def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
