@@ -1,0 +1,47 @@
+"""The dead-leaves scene: same spec same bytes, radiance range, independently moving layers."""
+
+import numpy as np
+import pytest
+
+from neuspike.errors import InputError
+from neuspike.scenes import SceneSpec, make_scene
+from neuspike.scenes.dead_leaves import FOREGROUND_LAYERS, dead_leaves_layers
+
+
+def spec(**kw):
+    base = dict(kind="dead_leaves", size=(48, 32), velocity_px_s=(800.0, -300.0), seed=7)
+    base.update(kw)
+    return SceneSpec(**base)
+
+
+def test_same_spec_same_bytes_and_seeds_differ():
+    t = np.array([-0.002, 0.0, 0.003])
+    a = make_scene(spec()).render(t)
+    assert a.shape == (3, 32, 48) and a.dtype == np.float32
+    assert np.array_equal(a, make_scene(spec()).render(t))
+    assert not np.array_equal(a, make_scene(spec(seed=8)).render(t))
+
+
+def test_radiance_follows_peak_and_dynamic_range():
+    frame = make_scene(spec(peak=2.0)).render([0.0])[0]
+    assert frame.min() >= 0.0 and frame.max() <= 2.0 + 1e-6 and frame.std() > 0.05
+    hdr = make_scene(spec(dynamic_range=100.0)).render([0.0])[0]
+    assert hdr.min() >= 0.01 - 1e-6 and hdr.max() <= 1.0 + 1e-6
+
+
+def test_layers_move_with_their_own_velocities():
+    layers = dead_leaves_layers(spec())
+    assert len(layers) == FOREGROUND_LAYERS + 1
+    assert layers[0][1] is None and layers[0][2] == (800.0, -300.0)
+    velocities = {v for _, _, v in layers}
+    assert len(velocities) == len(layers)  # every layer its own velocity
+    for _, alpha, _ in layers[1:]:
+        assert 0.0 <= alpha.min() and alpha.max() <= 1.0 and 0.0 < alpha.mean() < 1.0  # sparse, occluding
+    # a still background: the foreground still moves, so frames differ
+    still = make_scene(spec(velocity_px_s=(0.0, 0.0))).render([0.0, 0.01])
+    assert not np.allclose(still[0], still[1])
+
+
+def test_a_video_only_field_is_refused():
+    with pytest.raises(InputError, match="video"):
+        SceneSpec(kind="dead_leaves", fps=25.0)
