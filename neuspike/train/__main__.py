@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", default=[], metavar="KEY=JSON",
                    help="override a parameter of the method's registry entry (e.g. fusion='\"attention\"')")
     p.add_argument("--export", action="store_true", help="also write the best weights into neuspike/trained/")
+    p.add_argument("--init-from", metavar="FILE.safetensors",
+                   help="start from these weights (the full module, e.g. an earlier run's export) instead of fresh ones")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -72,7 +74,7 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
                      val_size=args.val_windows, val_every=args.val_every, lr=args.lr, warmup=args.warmup,
                      spike_only_fraction=args.spike_only_fraction, seed=args.seed,
                      threads=args.threads, workers=args.workers, precision=args.precision, params=params,
-                     export=args.export)
+                     export=args.export, init_from=args.init_from)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -44,7 +44,7 @@ from neuspike.methods import entry
 from neuspike.rng import derive_rng
 from neuspike.train.data import augment, build_shard, load_sample
 from neuspike.train.spec import TrainSpec
-from neuspike.weights import PACKAGE_WEIGHTS, save_safetensors
+from neuspike.weights import PACKAGE_WEIGHTS, load_safetensors, load_state_strict, save_safetensors
 
 __all__ = ["LOG_COLUMNS", "Trainer", "learning_rate", "train"]
 
@@ -83,6 +83,8 @@ class Trainer:
         self.fusion = self.params.get("spike_only") is False
         torch.manual_seed(spec.seed)
         self.module = cls.module_for(self.params)
+        if spec.init_from is not None:  # a second stage: start from earlier weights (a checkpoint still wins)
+            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from)
         self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
         import kornia
 
@@ -285,6 +287,12 @@ class Trainer:
         if resumed:
             self._truncate_log()
         self.prepare_data()
+        if not resumed and spec.init_from is not None:
+            # the starting weights set the bar: a second stage exports only what improves on them
+            for variant, spike_only in self._variants():
+                scores = self.validate(spike_only=spike_only)
+                self.log({"step": 0, "kind": "val", "variant": variant, **scores})
+                self.best[variant] = scores["val_psnr"]
         bar = self._bar(total=spec.steps, initial=self.step, desc=f"training {spec.method}", unit="step")
         t_last = time.perf_counter()
         while self.step < last:
@@ -309,9 +317,12 @@ class Trainer:
         bar.close()
         return {"step": self.step, "best": dict(self.best), "resumed": resumed}
 
+    def _variants(self) -> list[tuple[str, bool]]:
+        """(variant name, spike_only) of every variant this run validates and exports."""
+        return [("fusion", False), ("spike", True)] if self.fusion else [("single", False)]
+
     def _validate_and_export(self) -> None:
-        variants = [("fusion", False), ("spike", True)] if self.fusion else [("single", False)]
-        for variant, spike_only in variants:
+        for variant, spike_only in self._variants():
             scores = self.validate(spike_only=spike_only)
             self.log({"step": self.step, "kind": "val", "variant": variant, **scores})
             self.history.append({"step": self.step, "variant": variant, **scores})

@@ -100,6 +100,9 @@ class TrainSpec:
     params: dict[str, Any] = field(default_factory=dict)
     export: bool = False
     workers: int = 2
+    #: Weights (a ``.safetensors`` of the full module) the run starts from instead of a fresh
+    #: initialisation: a second stage of an earlier run. ``None``: fresh weights from ``seed``.
+    init_from: str | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -142,6 +145,8 @@ class TrainSpec:
             raise InputError("photos: at least one training photograph is needed")
         put(self, "photos", photos)
         put(self, "params", dict(self.params))
+        if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
+            raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
         if self.precision not in ("auto", "float32", "bfloat16"):
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
 

@@ -101,3 +101,24 @@ def test_a_resumed_run_equals_a_straight_run(tmp_path, one_torch_thread):
     assert steps == [1, 2, 3, 4]
     assert (tmp_path / "a" / "run" / "neuspike-net.safetensors").exists()
     assert (tmp_path / "a" / "run" / "neuspike-net-spike.safetensors").exists()
+
+
+def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_path, one_torch_thread):
+    shard = str(tmp_path / "shard")
+    first = Trainer(tiny_spec(tmp_path / "a", shard_dir=shard), quiet=True)
+    first.run()
+    weights = tmp_path / "a" / "run" / "neuspike-net.safetensors"
+    with pytest.raises(InputError, match="safetensors"):
+        tiny_spec(tmp_path / "b", shard_dir=shard, init_from=str(tmp_path / "w.pt"))
+    second = Trainer(tiny_spec(tmp_path / "b", shard_dir=shard, steps=2, init_from=str(weights)), quiet=True)
+    from neuspike.weights import load_safetensors
+
+    saved = load_safetensors(weights)
+    for k, v in second.module.state_dict().items():  # the exported (bfloat16) weights, cast back
+        assert torch.equal(v, saved[k].to(v.dtype)), k
+    second.run()
+    log = (tmp_path / "b" / "run" / "train_log.csv").read_text().splitlines()
+    baseline = [r for r in log[1:] if r.startswith("0,val,")]
+    assert len(baseline) == 2  # fusion and spike-only scored before the first step
+    assert set(second.best) == {"fusion", "spike"}
+    assert all(second.best[v] >= float(r.split(",")[9]) for v, r in zip(("fusion", "spike"), baseline))
