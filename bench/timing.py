@@ -285,12 +285,14 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
 
 def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: int, warmup: int,
             history_windows: float = DEFAULT_HISTORY_WINDOWS, seed: int = 0,
-            weights_dir: str | os.PathLike | None = None, device: str = "cpu",
+            weights_dir: str | os.PathLike | None = None, device: str = "cpu", threads: int | None = None,
             log: Callable[[str], Any] | None = None) -> pd.DataFrame:
     """Table 2 rows (:data:`TIMING_COLUMNS`): every method at every size.
 
     Each size's recording is simulated once (:func:`representative_sample`); each method is
-    created once and timed with :func:`time_method`.
+    created once and timed with :func:`time_method`. ``threads`` (when given) is re-applied to
+    torch before every method: the simulator's compiled kernels start an OpenMP pool that can
+    change the count torch uses.
     """
     import torch
 
@@ -309,6 +311,8 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
                                            modalities=sorted(needs), seed=seed)
         for name in names:
             method, reason = created[name]
+            if threads is not None and torch.get_num_threads() != threads:
+                torch.set_num_threads(threads)
             row: dict[str, Any] = {c: math.nan for c in TIMING_COLUMNS}
             row.update(method=name, resolution=res, width=width, height=height, threads=torch.get_num_threads(),
                        error="", **method_info(name, method))
@@ -498,7 +502,7 @@ def run(args: argparse.Namespace) -> Path:
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
-                     weights_dir=weights, device=args.device,
+                     weights_dir=weights, device=args.device, threads=args.threads,
                      log=lambda s: print(s, file=sys.stderr, flush=True))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
     load_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
