@@ -386,3 +386,16 @@ def test_grid_rows_leave_room_for_long_method_names():
     label = fig.axes[1].yaxis.label.get_window_extent()
     assert label.x0 >= 0, f"the row label starts {label.x0:.0f} px left of the figure"
     figs.close_all([fig])
+
+
+def test_fusion_claims_are_checked_against_the_fusion_network_not_the_classical_filter():
+    inputs = {"neuspike-net": "events+spikes", "fusion-complementary": "events+spikes", "tfi": "spikes"}
+    classical_best = curves({"neuspike-net": {L: 20 + k for L, k in L5.items()},
+                             "fusion-complementary": {L: 30 + k for L, k in L5.items()},
+                             "tfi": {L: 10 + k for L, k in L5.items()}}, "light", inputs=inputs)
+    assert cl.paper_fusion(classical_best) == ["neuspike-net"]
+    status, evidence = cl.fusion_best_everywhere(classical_best)
+    assert status == cl.FAILS and "fusion-complementary" in evidence
+    network_best = curves({"neuspike-net": {L: 31 + k for L, k in L5.items()},
+                           "fusion-complementary": {L: 30 + k for L, k in L5.items()}}, "light", inputs=inputs)
+    assert cl.fusion_best_everywhere(network_best)[0] == cl.HOLDS
