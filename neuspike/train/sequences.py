@@ -610,8 +610,14 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
 
 def export(module: torch.nn.Module, spec: TrainSpec, best: dict[str, Any], *, step: int, wall_s: float,
            folder: Path) -> Path:
-    """Write ``folder/<method>.safetensors`` and its card (training spec, steps, validation, wall time)."""
+    """Write ``folder/<method>.safetensors`` and its card (training spec, steps, validation, wall time).
+
+    Networks under a million parameters are stored in float32 (a few hundred kB); larger ones in
+    bfloat16, which halves the repository's copy (the card records the dtype).
+    """
     from neuspike.weights import save_safetensors
+
+    params = sum(p.numel() for p in module.parameters())
 
     card = {
         "method": spec.method,
@@ -626,7 +632,9 @@ def export(module: torch.nn.Module, spec: TrainSpec, best: dict[str, Any], *, st
         "commit": _commit(),
         "torch": torch.__version__,
     }
-    return save_safetensors(module, folder / f"{spec.method}.safetensors", card=card)
+    dtype = None if params < 1_000_000 else torch.bfloat16
+    card["validation_note"] += "; measured with the float32 weights before storage"
+    return save_safetensors(module, folder / f"{spec.method}.safetensors", card=card, dtype=dtype)
 
 
 # --- command line -------------------------------------------------------------------------------
