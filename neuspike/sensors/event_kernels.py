@@ -30,7 +30,7 @@ _INT64_MIN = np.int64(-(2 ** 63))
 _TWO_63 = 9.223372036854775808e18
 
 
-@njit(inline="always")
+@njit(inline="always", error_model="numpy")
 def _to_int64(x):
     """float64 -> int64 as NumPy's ``astype`` does on x86: NaN, inf and out-of-range give INT64_MIN."""
     if x < _TWO_63 and x > -_TWO_63:
@@ -38,7 +38,7 @@ def _to_int64(x):
     return _INT64_MIN
 
 
-@njit(inline="always")
+@njit(inline="always", error_model="numpy")
 def _fmin(a, b):
     """NumPy's ``fmin``: the smaller, ignoring a NaN operand."""
     if a != a:
@@ -48,7 +48,7 @@ def _fmin(a, b):
     return a if a <= b else b
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_floor,
                  bandwidth, bw_gain, bw_offset, bw_clip, leak, leak_dt,
                  symmetric, th_on, th_off, active):
@@ -115,7 +115,7 @@ def pixel_update(log_max, radiance, sig, mem, sig_new, d1, floor, slope, log_flo
     return n_active, events, np.int64(c_max)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def interval_keys(active, n_active, c_max, d1, sig, mem, leak, leak_dt, symmetric, th_on, th_off,
                   q_one, pix_bits, keys):
     """The event keys of one interval into ``keys``; returns their number.
@@ -166,7 +166,7 @@ def interval_keys(active, n_active, c_max, d1, sig, mem, leak, leak_dt, symmetri
     return at
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def write_events(keys, pix_bits, width, t_a, scale, t_out, x_out, y_out, p_out):
     """Decode sorted keys into events: ``t = t_a + fraction * scale`` (float64), x, y (uint16), p (int8 +-1)."""
     pix_mask = (np.int64(1) << pix_bits) - 1

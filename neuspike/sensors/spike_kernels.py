@@ -27,7 +27,7 @@ __all__ = ["PACK_MAGIC", "fire_packed", "fire_planes"]
 PACK_MAGIC = np.uint64(0x0102040810204080)
 
 
-@njit(inline="always")
+@njit(inline="always", error_model="numpy")
 def _fire_row(frame, light, threshold, charge, out):
     """One row of one plane, in the documented float32 order; returns the count of values < 0."""
     negative = 0
@@ -41,7 +41,7 @@ def _fire_row(frame, light, threshold, charge, out):
     return negative
 
 
-@njit(inline="always")
+@njit(inline="always", error_model="numpy")
 def _fire_row_dark(frame, light, threshold, charge, dark, out):
     """:func:`_fire_row` with a dark charge added to the drive."""
     negative = 0
@@ -55,7 +55,7 @@ def _fire_row_dark(frame, light, threshold, charge, dark, out):
     return negative
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def fire_planes(frames, hold, light, threshold, charge, dark, band_rows, out, negatives):
     """Bool planes ``out`` (K * hold, H, W); ``charge`` (H, W) float32 is updated in place.
 
@@ -82,7 +82,7 @@ def fire_planes(frames, hold, light, threshold, charge, dark, band_rows, out, ne
         negatives[b] = negative
 
 
-@njit(parallel=True, cache=True, nogil=True)
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def fire_packed(frames, hold, light, threshold, charge, dark, band_rows, out, negatives):
     """As :func:`fire_planes`, writing the planes bit-packed in the Vidar ``.dat`` layout.
 

@@ -96,3 +96,32 @@ def test_stage_metadata_marks_stages_fused_into_the_compiled_pixel():
     assert by_name["bandwidth"]["fused_into"] == "dvs_pixel" and by_name["leak"]["fused_into"] == "dvs_pixel"
     _, s, _ = captures("numpy", effects, frames, times)
     assert all("fused_into" not in x for x in s.meta["stages"])
+
+
+def test_a_pixel_whose_log_intensity_does_not_change_across_a_crossing_gives_numpy_semantics():
+    """Regression: on a fan scene a pixel's change equals its distance to the memorised level, so the
+    crossing fraction divides by zero; the compiled pass follows NumPy (inf, then the same clamps)
+    instead of raising ZeroDivisionError, and the events equal the NumPy path's."""
+    import neuspike.sensors.event_camera as ec
+    from neuspike.conditions import Condition
+    from neuspike.scenes import SceneSpec
+    from neuspike.simulate import SensorConfig, simulate_sample
+
+    original = ec.EventCamera.__init__
+    streams = {}
+    for backend in ("numba", "numpy"):
+        def init(self, *args, _backend=backend, **kwargs):
+            kwargs["backend"] = _backend
+            original(self, *args, **kwargs)
+
+        ec.EventCamera.__init__ = init
+        try:
+            streams[backend] = simulate_sample(SceneSpec(kind="fan", image="coins", size=(160, 100)),
+                                               Condition(light=0.25, motion=16), sensor=SensorConfig(), seed=0,
+                                               modalities=("events",), history_s=0.064).events
+        finally:
+            ec.EventCamera.__init__ = original
+    a, b = streams["numba"], streams["numpy"]
+    assert len(a) > 0
+    for field in ("t_s", "x", "y", "p"):
+        assert np.array_equal(getattr(a, field), getattr(b, field)), field
