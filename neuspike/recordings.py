@@ -159,7 +159,8 @@ def _check_file(kind: str, path: str | os.PathLike) -> Path:
     return p
 
 
-def _meta_float(meta: dict[str, Any] | None, key: str) -> float | None:
+def meta_float(meta: dict[str, Any] | None, key: str) -> float | None:
+    """A finite number from ``meta.json`` (``None`` when absent); anything else is a :class:`FormatError`."""
     if meta is None or meta.get(key) is None:
         return None
     try:
@@ -196,7 +197,7 @@ def _resolve_size(
     return height, width
 
 
-def _window_bounds(key_plane: int, total_planes: int, window_planes: int) -> tuple[int, int]:
+def window_bounds(key_plane: int, total_planes: int, window_planes: int) -> tuple[int, int]:
     """[start, stop) of a window of ``window_planes`` centred on ``key_plane`` inside the file."""
     if total_planes <= window_planes:
         return 0, total_planes
@@ -294,12 +295,12 @@ def load_sample(
     height, width = _resolve_size(height, width, meta)
     # stated by the caller or meta.json; else the spike file's own (an .npz may store it), else the Vidar's
     rate_given = check_positive("plane_rate_hz", plane_rate_hz) if plane_rate_hz is not None else (
-        _meta_float(meta, "plane_rate_hz")
+        meta_float(meta, "plane_rate_hz")
     )
     rate = rate_given or DEFAULT_PLANE_RATE_HZ
-    start_given = _meta_float(meta, "start_s")
+    start_given = meta_float(meta, "start_s")
     file_start_s = start_given or 0.0
-    meta_key_s = _meta_float(meta, "key_time_s")
+    meta_key_s = meta_float(meta, "key_time_s")
     notes: list[str] = []
     info: dict[str, Any] = {
         "spikes_path": str(spike_path) if spike_path else None,
@@ -367,7 +368,7 @@ def load_sample(
     info["plane_rate_hz"] = rate
     info["notes"] = notes
 
-    event_threshold = _meta_float(meta, "event_threshold")
+    event_threshold = meta_float(meta, "event_threshold")
     return Sample(
         height=int(height),  # type: ignore[arg-type]
         width=int(width),  # type: ignore[arg-type]
@@ -435,7 +436,7 @@ def _load_spikes(
 
     if window_planes is None:
         window_planes = total if _is_window_recording(meta) else DEFAULT_WINDOW_PLANES
-    w0, w1 = _window_bounds(key_plane, total, window_planes)
+    w0, w1 = window_bounds(key_plane, total, window_planes)
     if whole is None:
         from neuspike.formats.vidar_dat import read_dat
 
@@ -449,7 +450,7 @@ def _load_spikes(
         file_gain = whole.gain
         threshold = whole.threshold
 
-    meta_gain = _meta_float(meta, "gain")
+    meta_gain = meta_float(meta, "gain")
     if gain is not None:
         used_gain, gain_source = gain, "given"
     elif meta_gain is not None:
@@ -458,7 +459,7 @@ def _load_spikes(
         used_gain, gain_source = file_gain, "file"
     else:
         used_gain, gain_source = None, "unknown"
-    threshold = _meta_float(meta, "threshold") if _meta_float(meta, "threshold") is not None else threshold
+    threshold = meta_float(meta, "threshold") if meta_float(meta, "threshold") is not None else threshold
 
     stream = SpikeStream(
         planes, plane_rate_hz=rate, start_s=file_start_s + w0 / rate, gain=used_gain,

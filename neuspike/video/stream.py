@@ -41,7 +41,9 @@ from neuspike.recordings import (
     DEFAULT_WINDOW_PLANES,
     EVENT_HISTORY_S,
     SPIKE_SUFFIXES,
+    meta_float,
     read_meta,
+    window_bounds,
 )
 from neuspike.sample import Sample
 from neuspike.streams import P_DTYPE, T_DTYPE, XY_DTYPE, EventStream, SpikeStream
@@ -61,18 +63,6 @@ FOLDER_SPIKES = ("spikes.dat", "spikes.npz")
 #: Events read from the file at a time (about 0.4 MB).
 EVENT_BLOCK = 1 << 15
 FOLDER_EVENTS = ("events.h5", "events.hdf5", "events.npz", "events.txt", "events.aedat4")
-
-
-def _meta_float(meta: dict[str, Any] | None, key: str) -> float | None:
-    if meta is None or meta.get(key) is None:
-        return None
-    try:
-        v = float(meta[key])
-    except (TypeError, ValueError):
-        raise FormatError(f"meta.json: {key} must be a number, got {meta[key]!r}") from None
-    if not math.isfinite(v):
-        raise FormatError(f"meta.json: {key} must be finite, got {meta[key]!r}")
-    return v
 
 
 # --------------------------------------------------------------------------- event sources
@@ -375,8 +365,8 @@ def open_recording(
         if height is not None and (height, width) != (mh, mw):
             raise InputError(f"size {width}x{height} given, but meta.json states {mw}x{mh}")
         height, width = mh, mw
-    rate_given = check_positive("plane_rate_hz", plane_rate_hz) if plane_rate_hz is not None else _meta_float(meta, "plane_rate_hz")
-    start_given = _meta_float(meta, "start_s")
+    rate_given = check_positive("plane_rate_hz", plane_rate_hz) if plane_rate_hz is not None else meta_float(meta, "plane_rate_hz")
+    start_given = meta_float(meta, "start_s")
     rate = rate_given or DEFAULT_PLANE_RATE_HZ
     start_s = start_given or 0.0
     num_planes = 0
@@ -418,7 +408,7 @@ def open_recording(
             source.close()
             raise InputError(f"event file {ev}: sensor size {source.width}x{source.height} does not match {width}x{height}")
         height, width = source.height, source.width
-    meta_gain = _meta_float(meta, "gain")
+    meta_gain = meta_float(meta, "gain")
     if sp is None:
         used_gain, gain_source = None, "unknown"
     elif gain is not None:
@@ -429,12 +419,12 @@ def open_recording(
         used_gain, gain_source = file_gain, "file"
     else:
         used_gain, gain_source = None, "unknown"
-    threshold = _meta_float(meta, "threshold")
+    threshold = meta_float(meta, "threshold")
     return VideoRecording(
         height=int(height), width=int(width), plane_rate_hz=float(rate), start_s=float(start_s),  # type: ignore[arg-type]
         num_planes=num_planes, gain=used_gain, gain_source=gain_source,
         threshold=threshold if threshold is not None else file_threshold,
-        event_threshold=_meta_float(meta, "event_threshold"), meta=meta, folder=folder,
+        event_threshold=meta_float(meta, "event_threshold"), meta=meta, folder=folder,
         spikes_path=sp, events_path=ev, raw_width=raw_width, _spike_npz=npz, _events=source,
     )
 
@@ -588,13 +578,6 @@ class _EventBuffer:
 
 
 # --------------------------------------------------------------------------- streaming
-def _window_bounds(key_plane: int, total: int, window_planes: int) -> tuple[int, int]:
-    if total <= window_planes:
-        return 0, total
-    start = min(max(key_plane - window_planes // 2, 0), total - window_planes)
-    return start, start + window_planes
-
-
 def _check_times(times_s: Sequence[float] | np.ndarray, recording: VideoRecording) -> np.ndarray:
     times = np.asarray(times_s, dtype=np.float64).reshape(-1)
     if times.size and not np.isfinite(times).all():
@@ -655,7 +638,7 @@ def stream_samples(
         info: dict[str, Any] = {"frame": k}
         if recording.spikes_path is not None:
             key_plane = min(int(math.floor((t - recording.start_s) * rate + 1e-9)), total - 1)
-            w0, w1 = _window_bounds(key_plane, total, window_planes)
+            w0, w1 = window_bounds(key_plane, total, window_planes)
             w_start, w_end = recording.start_s + w0 / rate, recording.start_s + w1 / rate
             info.update(window_planes_in_file=[w0, w1], key_plane_in_file=key_plane, file_planes=total)
             if planes is not None:
