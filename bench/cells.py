@@ -152,7 +152,8 @@ def load_plugins(plugins: tuple[str, ...]) -> list[str]:
     """
     loaded = []
     for plugin in plugins:
-        if plugin in _LOADED_PLUGINS:
+        key = _plugin_key(plugin)
+        if key in _LOADED_PLUGINS:
             continue
         try:
             if plugin.endswith(".py") or os.sep in plugin:
@@ -179,14 +180,19 @@ def load_plugins(plugins: tuple[str, ...]) -> list[str]:
             raise
         except Exception as exc:
             raise InputError(f"plug-in {plugin!r} failed to load: {type(exc).__name__}: {exc}") from exc
-        _LOADED_PLUGINS[plugin] = module
+        _LOADED_PLUGINS[key] = module
         loaded.append(plugin)
     return loaded
 
 
+def _plugin_key(plugin: str) -> str:
+    """One name per plug-in: a file's resolved path (``a.py`` and ``/abs/a.py`` are one plug-in), else the module name."""
+    return str(Path(plugin).resolve()) if plugin.endswith(".py") or os.sep in plugin else plugin
+
+
 def forget_plugin(plugin: str) -> None:
     """Forget that ``plugin`` was imported (tests that unregister its methods use this)."""
-    module = _LOADED_PLUGINS.pop(plugin, None)
+    module = _LOADED_PLUGINS.pop(_plugin_key(plugin), None)
     if module is not None:
         sys.modules.pop(module.__name__, None)
 

@@ -90,6 +90,15 @@ def plugin(tmp_path):
     forget_plugin(str(path))
 
 
+def test_plugin_named_by_relative_and_absolute_path_loads_once(plugin, monkeypatch):
+    """The CLI names a plug-in as typed, workers by its resolved path: one file, registered once."""
+    path = Path(plugin)
+    monkeypatch.chdir(path.parent)
+    assert load_plugins((path.name,)) == []  # already loaded under its absolute path
+    assert load_plugins((str(path),)) == []
+    assert registry.entry("ht-mean").params == {}
+
+
 def tiny_grid(lights=(0.25, 0.5), motions=(8, 16), seeds=(0,)):
     return grids.Grid(
         scenes=(grids.scene_entry("pan:camera", SIZE),), lights=lights, motions=motions,
