@@ -49,13 +49,13 @@ from neuspike import methods as registry
 from neuspike.cache import RecordingCache
 from neuspike.errors import InputError
 from neuspike.jsonio import canonical_json
-from neuspike.metrics import FULL_REFERENCE_METRICS, evaluate
-from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording
+from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
+from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording, static_region
 
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
 #: The metrics of every row, in the order rows are produced.
-METRICS: tuple[str, ...] = tuple(FULL_REFERENCE_METRICS)
+METRICS: tuple[str, ...] = (*FULL_REFERENCE_METRICS, "static_texture")
 DATA_RANGE = 1.0
 
 
@@ -337,12 +337,18 @@ def run_cell(task: CellTask) -> CellResult:
                 info[name]["error"] = f"simulation failed: {one_line(exc)}"
             resolved = {}
 
-    sample = truth = None
+    sample = truth = static = None
     images: dict[str, np.ndarray] = {}
     if recording is not None:
         full = recording.to_sample()
         truth = full.ground_truth
         sample = full.without_ground_truth()
+        try:  # where the scene never moves: the static-texture measure of the claims
+            static = static_region(cell.scene.spec, cell.condition, sensor=task.sensor, modalities=task.modalities,
+                                   history_s=task.history_s, min_fraction=STATIC_MIN_FRACTION)
+        except Exception as exc:
+            failures["static region"] = traceback.format_exc()
+            static = None
         if task.keep_images:
             images["gt"] = truth
 
@@ -368,6 +374,8 @@ def run_cell(task: CellTask) -> CellResult:
                 image, ms = _timed_reconstruct(slot, sample)
                 row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
                 values = evaluate(image, truth, data_range=DATA_RANGE)
+                if static is not None:
+                    values["static_texture"] = static_texture(image, truth, static, data_range=DATA_RANGE)
                 row.update(status=OK, error="")
                 if task.keep_images:
                     images[name] = np.array(image, dtype=np.float32, copy=True)  # not a reused buffer

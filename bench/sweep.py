@@ -62,7 +62,7 @@ from neuspike.simulate import DEFAULT_HISTORY_WINDOWS
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
-HARNESS_VERSION = "1"
+HARNESS_VERSION = "2"  # 2: the static_texture metric
 #: Default event history for recurrent methods, in windows of the spike window's duration.
 
 

@@ -36,6 +36,7 @@ from bench.grid import AXES
 METRIC_LABELS: Mapping[str, str] = {
     "psnr": "PSNR (dB)", "ssim": "SSIM", "psnr_affine": "PSNR, affine-aligned (dB)",
     "ssim_affine": "SSIM, affine-aligned",
+    "static_texture": "static texture (gradient correlation over the static regions)",
 }
 #: Method families, in the order they are listed.
 FAMILIES: tuple[str, ...] = ("spike", "event", "fusion", "unknown")
@@ -375,7 +376,7 @@ def fmt(value: Any, kind: str = "g") -> str:
         return "yes" if value else ""
     if kind in ("psnr", "psnr_affine", "db"):
         return f"{float(value):.2f}"
-    if kind in ("ssim", "ssim_affine"):
+    if kind in ("ssim", "ssim_affine", "static_texture"):
         return f"{float(value):.4f}"
     if kind == "ms":
         v = float(value)

@@ -197,6 +197,69 @@ def _tag(stages: Iterable[dict[str, Any]], modality: str) -> list[dict[str, Any]
     return [{"modality": modality, **s} for s in stages]
 
 
+def _window_times(condition: Condition, sensor: SensorConfig, history_s: float, events: bool,
+                  center_s: float = 0.0) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """Algorithm 1's instants: ``(hold, n_history_frames, scene_times, sensor_times)``.
+
+    The S frames of the window (plus ``n_history_frames`` before it when ``events``), each held for
+    ``hold`` planes; scene instants are ``1 / upsampled_rate_hz`` apart around ``center_s``, sensor
+    instants the centres of the held frames, the window starting at sensor time 0.
+    """
+    if history_s < 0 or not np.isfinite(history_s):
+        raise InputError(f"history_s must be >= 0, got {history_s!r}")
+    s = condition.motion
+    hold = sensor.planes // s
+    frame_dt_sensor = hold / sensor.plane_rate_hz
+    n_hist = int(np.ceil(history_s / frame_dt_sensor - 1e-9)) if events else 0
+    k = np.arange(-n_hist, s, dtype=np.float64)
+    frame_dt_scene = 1.0 / sensor.upsampled_rate_hz
+    scene_times = center_s + (k - (s - 1) / 2.0) * frame_dt_scene
+    sensor_times = (k + 0.5) * frame_dt_sensor
+    return hold, n_hist, scene_times, sensor_times
+
+
+def static_region(
+    scene_spec: SceneSpec,
+    condition: Condition,
+    *,
+    sensor: SensorConfig,
+    modalities: Iterable[str] = MODALITIES,
+    history_s: float = 0.0,
+    min_fraction: float = 0.0,
+    chunk: int = 64,
+) -> np.ndarray:
+    """Pixels whose radiance never changes while the cameras of :func:`simulate_recording` look.
+
+    The scene is rendered at exactly the instants the simulator renders for the same arguments (the
+    window's S frames and, when events are simulated, their history) and a pixel is static when
+    its value is the same at every instant. A still scene is static everywhere, a fan outside the
+    blades' reach; a pan or zoom only where the photograph itself is uniform. Rendered ``chunk``
+    frames at a time, so memory stays small on long histories. With ``min_fraction``, a region
+    that cannot cover that fraction of the view (judged from the first and last instants alone) is
+    returned empty without rendering the rest.
+
+    Returns
+    -------
+    numpy.ndarray
+        bool (H, W).
+    """
+    mods = _check_modalities(modalities)
+    if sensor.planes % condition.motion:
+        raise InputError(f"the spike window of {sensor.planes} planes is not a whole multiple of S = {condition.motion}")
+    _, _, times, _ = _window_times(condition, sensor, history_s, EVENTS in mods)
+    scene = make_scene(scene_spec)
+    ends = scene.render(times[[0, -1]])
+    if np.mean(ends[0] == ends[1]) < min_fraction:
+        return np.zeros(ends.shape[1:], dtype=bool)
+    lo = hi = None
+    for i in range(0, len(times), max(1, int(chunk))):
+        frames = scene.render(times[i:i + chunk])
+        f_lo, f_hi = frames.min(axis=0), frames.max(axis=0)
+        lo = f_lo if lo is None else np.minimum(lo, f_lo)
+        hi = f_hi if hi is None else np.maximum(hi, f_hi)
+    return np.asarray(lo == hi)
+
+
 def simulate_window(
     scene: Any,
     condition: Condition,
@@ -241,15 +304,8 @@ def simulate_window(
             f"the spike window of {sensor.planes} planes is not a whole multiple of the motion scale "
             f"S = {s} (Algorithm 1 holds each of the S frames for T // S planes); use T = {lo or s} or {lo + s}"
         )
-    if history_s < 0 or not np.isfinite(history_s):
-        raise InputError(f"history_s must be >= 0, got {history_s!r}")
-    hold = sensor.planes // s
-    frame_dt_scene = 1.0 / sensor.upsampled_rate_hz
+    hold, n_hist, scene_times, sensor_times = _window_times(condition, sensor, history_s, EVENTS in mods, center_s)
     frame_dt_sensor = hold / sensor.plane_rate_hz
-    n_hist = int(np.ceil(history_s / frame_dt_sensor - 1e-9)) if EVENTS in mods else 0
-    k = np.arange(-n_hist, s, dtype=np.float64)
-    scene_times = center_s + (k - (s - 1) / 2.0) * frame_dt_scene
-    sensor_times = (k + 0.5) * frame_dt_sensor
 
     spike_cam, event_cam, effects = _cameras(scene, condition, sensor, mods, rng)
     meta = _base_meta(scene, condition, sensor, seed, effects, "window")
@@ -258,7 +314,7 @@ def simulate_window(
     t0 = time.perf_counter()
     frames = scene.render(scene_times)
     gt = scene.render(np.array([center_s]))[0]
-    stages = [{"modality": "scene", "name": "render", "params": {"frames": int(len(k)) + 1},
+    stages = [{"modality": "scene", "name": "render", "params": {"frames": int(len(scene_times)) + 1},
                "seconds": time.perf_counter() - t0}]
 
     spikes = events = None

@@ -17,7 +17,7 @@ import pytest
 
 from bench import grid as grids
 from neuspike.cache import load_recording, save_recording
-from bench.cells import forget_plugin, load_plugins
+from bench.cells import METRICS, forget_plugin, load_plugins
 from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
 from bench.sweep import ConfigMismatch, Execution, SweepSpec, main, run_sweep
 from neuspike import methods as registry
@@ -179,8 +179,10 @@ def test_tiny_sweep_runs_end_to_end(plugin, tmp_path):
     assert outcome.exit_code == 0 and (outcome.n_ok, outcome.n_failed, outcome.n_missing) == (4, 0, 0)
     frame = read_csv(outcome.results_path)
     assert list(frame.columns) == list(COLUMNS)
-    assert len(frame) == 4 * 2 * 4  # cells x methods x metrics
-    assert sorted(frame["metric"].unique()) == ["psnr", "psnr_affine", "ssim", "ssim_affine"]
+    assert len(frame) == 4 * 2 * len(METRICS)  # cells x methods x metrics
+    assert sorted(frame["metric"].unique()) == ["psnr", "psnr_affine", "ssim", "ssim_affine", "static_texture"]
+    # a pan has no static region: the measure is left empty, not made up
+    assert frame.loc[frame["metric"] == "static_texture", "value"].isna().all()
     assert set(zip(frame["light"], frame["motion"])) == {(0.25, 8), (0.25, 16), (0.5, 8), (0.5, 16)}
 
     # the skipped method: rows with the reason, not a failure; its modality is not simulated
@@ -218,7 +220,7 @@ def test_failing_method_gives_error_rows_and_nonzero_exit(plugin, tmp_path, monk
     assert main(args + ["--out", str(tmp_path / "a")]) == 1
     frame = read_csv(tmp_path / "a" / "results.csv")
     failed = frame[frame["method"] == "ht-fail"]
-    assert len(failed) == 4 and (failed["status"] == "error").all() and failed["value"].isna().all()
+    assert len(failed) == len(METRICS) and (failed["status"] == "error").all() and failed["value"].isna().all()
     assert failed["error"].str.contains("RuntimeError: deliberate failure").all()
     assert (frame[frame["method"] == "ht-mean"]["status"] == "ok").all()
     assert "deliberate failure" in next((tmp_path / "a" / "errors").glob("*.txt")).read_text()
@@ -331,7 +333,7 @@ def test_kill_midway_then_rerun_equals_an_uninterrupted_run(plugin, tmp_path):
     before = len(list(parts.glob("*.csv")))
     assert 1 <= before < 6, "the kill must land midway"
     for part in parts.glob("*.csv"):  # nothing half-written: every part parses, with all its rows
-        assert len(read_csv(part)) == 4
+        assert len(read_csv(part)) == len(METRICS)
     assert not (out / "results.csv").exists()
 
     grid = grids.Grid(scenes=(grids.scene_entry("pan:camera", SIZE),), lights=(0.25, 0.5, 1.0),

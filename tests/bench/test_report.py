@@ -318,12 +318,24 @@ def test_claim_fusion_degrades_least_with_noise():
     assert cl.fusion_degrades_least(curves({"fusion-x": {L: 1.0 for L in L5}}, "light"))[0] == cl.UNCHECKED
 
 
-def test_claim_events_miss_static_texture_is_never_decided_by_psnr_or_ssim():
-    # a uniform event output can outscore a noisy spike method in SSIM: the claim stays unchecked
+def test_claim_events_miss_static_texture_is_decided_by_the_static_texture_measure():
+    def texture(values, kind="still"):
+        return rows_frame([row(m, metric="static_texture", value=v, seed=0, scene=f"{kind}:camera",
+                               inputs=INPUTS.get(m, "spikes"), light=0.25, motion=128, noise="none")
+                           for m, v in values.items()])
+
+    # PSNR/SSIM alone never decide it: a uniform event output can outscore a noisy spike method
     still = curves({"events-integrate": {0.25: 24.0}, "tfi": {0.25: 4.0}}, "light", kind="still")
     status, evidence = cl.events_miss_static_texture(still)
-    assert status == cl.UNCHECKED and "events-integrate 0.6000" in evidence and "grid_still_camera" in evidence
-    assert cl.events_miss_static_texture(curves({"tfi": {0.25: 1.0}}, "light"))[0] == cl.UNCHECKED
+    assert status == cl.UNCHECKED and "no static-texture values" in evidence
+    holds = texture({"events-integrate": 0.2, "tfi": 0.9, "snm": 0.7})
+    status, evidence = cl.events_miss_static_texture(holds)
+    assert status == cl.HOLDS and "event methods mean 0.200" in evidence and "spike methods mean 0.800" in evidence
+    fails = texture({"events-integrate": 0.45, "tfi": 0.8})  # 0.45 >= 0.5 * 0.8
+    assert cl.events_miss_static_texture(fails)[0] == cl.FAILS
+    assert cl.events_miss_static_texture(texture({"tfi": 0.8}))[0] == cl.UNCHECKED  # no event method
+    nan_only = texture({"events-integrate": float("nan"), "tfi": float("nan")}, kind="pan")
+    assert cl.events_miss_static_texture(nan_only)[0] == cl.UNCHECKED
 
 
 def test_evaluate_claims_reports_every_claim_and_contains_a_failing_check():

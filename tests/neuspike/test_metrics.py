@@ -190,3 +190,44 @@ def test_laplacian_variance_of_a_checkerboard_is_closed_form():
     a = 0.25
     board = a * np.where((np.add.outer(np.arange(16), np.arange(16)) % 2) == 0, 1.0, -1.0)
     assert metrics.laplacian_variance(board) == pytest.approx(64 * a * a, rel=1e-12)
+
+
+# --- static texture --------------------------------------------------------------------------------
+
+def test_static_texture_is_invariant_to_gain_and_offset(photo):
+    static = np.ones_like(photo, dtype=bool)
+    image = np.clip(0.2 + 0.5 * photo, 0, 1)
+    assert metrics.static_texture(image, photo, static, data_range=1.0) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_static_texture_scores_a_flat_image_zero_and_falls_with_blur(photo, rng):
+    static = np.ones_like(photo, dtype=bool)
+    flat = np.full_like(photo, 0.5)
+    assert metrics.static_texture(flat, photo, static, data_range=1.0) == 0.0
+    blurred = [cv2.GaussianBlur(photo, (0, 0), s) for s in (1.0, 3.0, 8.0)]
+    scores = [metrics.static_texture(b, photo, static, data_range=1.0) for b in blurred]
+    assert scores[0] > scores[1] > scores[2]
+    noise = rng.random(photo.shape).astype(np.float32)  # texture unrelated to the reference
+    assert abs(metrics.static_texture(noise, photo, static, data_range=1.0)) < 0.1
+
+
+def test_static_texture_looks_only_inside_the_trimmed_region(photo):
+    """Texture outside the region (or within the trimmed margin of its edge) does not count."""
+    h, w = photo.shape
+    static = np.zeros((h, w), dtype=bool)
+    static[:, : w // 2] = True
+    image = photo.copy()
+    cut = w // 2 - metrics.STATIC_ERODE_PX  # the measured pixels end here
+    image[:, cut - 1:] = 0.5  # flat beyond: the 3x3 gradient at the last measured column reads col cut
+    image[:, cut - 1] = photo[:, cut - 1]
+    assert metrics.static_texture(image, photo, static, data_range=1.0) > 0.97
+    image[:, : cut - 3] = 0.5
+    assert metrics.static_texture(image, photo, static, data_range=1.0) < 0.5
+
+
+def test_static_texture_needs_a_large_enough_region(photo):
+    tiny = np.zeros_like(photo, dtype=bool)
+    tiny[:10, :10] = True
+    assert math.isnan(metrics.static_texture(photo, photo, tiny, data_range=1.0))
+    with pytest.raises(InputError, match="static"):
+        metrics.static_texture(photo, photo, tiny.astype(np.uint8), data_range=1.0)

@@ -183,3 +183,35 @@ def test_a_motion_scale_that_does_not_fit_the_window_names_both_options(tmp_path
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"--planes {planes} is not a whole multiple of --motion {motion}" in err[0]
     assert advice in err[0] and not out.exists()
+
+
+# --- static region ---------------------------------------------------------------------------------
+
+def test_static_region_of_each_kind():
+    from neuspike.simulate import static_region
+
+    sensor, cond = SensorConfig(planes=64), Condition(noise="none", motion=32)
+    still = static_region(SceneSpec(kind="still", image="camera", size=SMALL), cond, sensor=sensor)
+    assert still.all()
+    pan = static_region(SceneSpec(kind="pan", image="camera", size=SMALL, velocity_px_s=(400.0, 0.0)), cond,
+                        sensor=sensor)
+    assert pan.mean() < 0.05
+    assert not static_region(SceneSpec(kind="pan", image="camera", size=SMALL, velocity_px_s=(400.0, 0.0)), cond,
+                             sensor=sensor, min_fraction=0.5).any()
+    fan = static_region(SceneSpec(kind="fan", image="coins", size=SMALL), cond, sensor=sensor, history_s=0.01)
+    assert 0.2 < fan.mean() < 0.95  # the background outside the blades' reach
+
+
+def test_static_region_is_where_no_event_fires():
+    """Independent check: with no noise, the pixels it calls static see no event, history included."""
+    from neuspike.simulate import static_region
+
+    spec = SceneSpec(kind="fan", image="coins", size=SMALL)
+    sensor, cond = SensorConfig(planes=64), Condition(noise="none", motion=32)
+    static = static_region(spec, cond, sensor=sensor, history_s=0.01)
+    rec = simulate_window(make_scene(spec), cond, rng=np.random.default_rng(0), sensor=sensor, history_s=0.01)
+    ev = rec.events
+    fired = np.zeros(static.shape, dtype=bool)
+    fired[ev.y, ev.x] = True
+    assert fired.any() and not (fired & static).any()
+    assert fired[~static].mean() > 0.5  # and most moving pixels do fire
