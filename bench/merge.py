@@ -1,0 +1,148 @@
+"""Merge sweeps of the same cells run with different methods into one results folder.
+
+A new method (a plug-in, a network trained further) joins an existing sweep without recomputing the
+methods that did not change: run the sweep again with ``--methods NEW`` (and the same ``--cache``, so
+the recordings are read, not simulated again), then merge the two folders::
+
+    python -m bench.merge reports/light runs/light-base runs/light-new
+
+The folders must hold the same sweep apart from its methods: the same grid (scenes, light, motion,
+noise, seeds, effects), sensor, harness version and event history (the simulator is deterministic
+given these, so every folder scored its methods on the same recordings). Their methods must not
+overlap, and every folder must be complete (a ``results.csv`` with every cell). The output holds
+``results.csv`` (sorted as a sweep's), ``config.json`` (the sweep with the union of the methods, and
+``merged_from``: each folder's methods and configuration) and ``metadata.json`` (the first folder's
+provenance, each folder's own under ``merged_from``); then the report is rebuilt from them.
+
+Writing is atomic per file; the output folder may be one of the inputs only if it is the first.
+
+Exit status: 0 merged; 2 folders that do not fit together (the message says what differs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import pandas as pd
+
+from bench.results import read_csv, sort_rows, to_csv_text
+from neuspike.atomic import write_json, write_text
+from neuspike.errors import InputError
+
+__all__ = ["merge_sweeps", "main"]
+
+#: Cell identity columns: rows of two folders describe the same cell when these agree.
+CELL_KEY = ("scene", "kind", "image", "width", "height", "planes", "light", "motion", "noise", "seed")
+
+
+def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
+    paths = {name: folder / name for name in ("config.json", "metadata.json", "results.csv")}
+    missing = [str(p) for p in paths.values() if not p.is_file()]
+    if missing:
+        raise InputError(f"{folder}: not a finished sweep folder (missing {', '.join(missing)})")
+    try:
+        config = json.loads(paths["config.json"].read_text())
+        metadata = json.loads(paths["metadata.json"].read_text())
+    except ValueError as exc:
+        raise InputError(f"{folder}: unreadable JSON ({exc})") from exc
+    if "sweep" not in config:
+        raise InputError(f"{folder}/config.json: no 'sweep' section (not written by bench.sweep or bench.noise)")
+    return config, metadata, read_csv(paths["results.csv"])
+
+
+def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
+    """What must agree between merged folders: the sweep without its methods and weights folder."""
+    resolved = sweep.get("resolved", {})
+    return {
+        "name": sweep.get("name"), "axis": sweep.get("axis"), "grid": sweep.get("grid"),
+        "sensor": sweep.get("sensor"), "harness_version": sweep.get("harness_version"),
+        "history_s": resolved.get("history_s"),
+        # events are simulated for the history only when someone consumes them: the spike
+        # recordings match either way, the event recordings only with the same history
+        "events": "events" in resolved.get("modalities", []),
+    }
+
+
+def merge_sweeps(out: str | Path, folders: Sequence[str | Path]) -> pd.DataFrame:
+    """Merge ``folders`` (see the module docstring) into ``out``; returns the merged results.
+
+    Raises
+    ------
+    InputError
+        Fewer than two folders, a folder that is not a finished sweep, sweeps of different cells,
+        overlapping methods, or cells missing from a folder.
+    """
+    folders = [Path(f) for f in folders]
+    if len(folders) < 2:
+        raise InputError("merge needs at least two sweep folders")
+    out = Path(out)
+    if out.resolve() in {f.resolve() for f in folders[1:]}:
+        raise InputError(f"{out}: the output folder may be the first input, not a later one")
+    loaded = [_load(f) for f in folders]
+
+    first_id = _identity(loaded[0][0]["sweep"])
+    seen: dict[str, Path] = {}
+    cells = None
+    for folder, (config, _, frame) in zip(folders, loaded):
+        ident = _identity(config["sweep"])
+        if ident != first_id:
+            changed = sorted(k for k in ident if ident[k] != first_id[k])
+            raise InputError(f"{folder} is a different sweep from {folders[0]} (differs in: {', '.join(changed)}); "
+                             "only sweeps of the same cells merge")
+        for method in pd.unique(frame["method"]):
+            if method in seen:
+                raise InputError(f"method {method!r} is in both {seen[method]} and {folder}; merge disjoint method sets")
+            seen[method] = folder
+        keys = set(map(tuple, frame[list(CELL_KEY)].astype(str).drop_duplicates().to_numpy()))
+        if cells is None:
+            cells = keys
+        elif keys != cells:
+            raise InputError(f"{folder} does not hold the same cells as {folders[0]} "
+                             f"({len(keys ^ cells)} cells in one only); finish both sweeps first")
+
+    merged = sort_rows(pd.concat([frame for _, _, frame in loaded], ignore_index=True))
+    sweep = dict(loaded[0][0]["sweep"])
+    sweep["methods"] = [m for _, (c, _, _) in zip(folders, loaded) for m in c["sweep"].get("methods", [])]
+    sources = [{"folder": str(f), "methods": c["sweep"].get("methods", []), "sweep": c["sweep"],
+                "execution": c.get("execution")} for f, (c, _, _) in zip(folders, loaded)]
+    metadata = dict(loaded[0][1])
+    metadata["merged_from"] = [{"folder": str(f), **m} for f, (_, m, _) in zip(folders, loaded)]
+
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(out / "results.csv", to_csv_text(merged))
+    write_json(out / "config.json", {"sweep": sweep, "merged_from": sources})
+    write_json(out / "metadata.json", metadata)
+    return merged
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m bench.merge", description=__doc__.split("\n\n")[0],
+                                epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("out", help="output folder (results.csv, config.json, metadata.json, report)")
+    p.add_argument("folders", nargs="+", help="two or more finished sweep folders of the same cells")
+    p.add_argument("--no-report", action="store_true", help="do not rebuild the report")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        merged = merge_sweeps(args.out, args.folders)
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"merged {merged['method'].nunique()} methods over "
+          f"{len(merged.drop_duplicates(list(CELL_KEY)))} cells into {args.out}/results.csv")
+    if not args.no_report:
+        from bench.report import build_report
+
+        print(f"report: {build_report(Path(args.out))}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
