@@ -138,6 +138,9 @@ class TrainSpec:
     val_every: int = 100
     checkpoint_every: int = 25
     precision: str = "auto"
+    #: Weights (.safetensors, e.g. the shipped ones) to start from instead of a random draw: a later
+    #: stage, or a run continued on a machine that has the repository but not the checkpoint.
+    init_from: str | None = None
 
     def __post_init__(self) -> None:
         if self.crop > self.data.size or self.crop < 8:
@@ -148,6 +151,8 @@ class TrainSpec:
             raise InputError(f"warmup: expected 0..{self.length - 1}, got {self.warmup}")
         if self.precision not in ("auto", "float32", "bfloat16"):
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
+        if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
+            raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -515,7 +520,8 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
     run_dir.mkdir(parents=True, exist_ok=True)
     spec_path = run_dir / "spec.json"
     if spec_path.is_file():
-        frozen = json.loads(spec_path.read_text())
+        # through from_dict, so a spec frozen before a field existed reads with that field's default
+        frozen = json.loads(json.dumps(TrainSpec.from_dict(json.loads(spec_path.read_text())).as_dict()))
         if frozen != json.loads(json.dumps(spec.as_dict())):
             raise InputError(f"{spec_path}: this run folder holds a different spec; use another --run-dir")
     else:
@@ -548,6 +554,13 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
         module.load_state_dict(ck["module"])
         opt.load_state_dict(ck["optimizer"])
         step, best, wall_s = int(ck["step"]), dict(ck["best"]), float(ck["wall_s"])
+    elif spec.init_from is not None:  # the checkpoint, when there is one, wins: a resumed run goes on
+        from neuspike.weights import load_safetensors, load_state_strict
+
+        load_state_strict(module, load_safetensors(spec.init_from), spec.init_from)
+        # the starting weights set the bar: an export must beat what the run started from
+        best = {"step": 0, **validate(module, val_shard, spec)}
+        print(f"{spec.method}: starting from {spec.init_from} (validation SSIM {best['val_ssim']:.4f})", file=sys.stderr)
     log_path = run_dir / "train_log.csv"
     fields = ["step", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds_per_step", "wall_s",
               "val_l1", "val_ssim", "val_ssim_last"]
@@ -674,6 +687,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="arithmetic of training (default: float32 for firenet-sim; auto for e2vid, which is "
                         "bfloat16 where the CPU computes it natively)")
     p.add_argument("--length", type=int, default=None, help="windows per training sequence (<= --windows)")
+    p.add_argument("--init-from", metavar="FILE.safetensors", default=None,
+                   help="start from these weights (a later stage, or a run continued where its checkpoint is "
+                        "gone: copy the shipped neuspike/trained/<method>.safetensors elsewhere first, since "
+                        "exports overwrite it); a checkpoint in --run-dir still wins")
     p.add_argument("--simulate-only", action="store_true", help="build the sequence shard and stop")
     p.add_argument("--quick", action="store_true", help="a tiny run that finishes in a minute (smoke test)")
     return p
@@ -696,6 +713,8 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         data_kw["size"] = args.size
     if args.precision is not None:
         kw["precision"] = args.precision
+    if args.init_from is not None:
+        kw["init_from"] = str(args.init_from)
     return TrainSpec(method=args.method, data=DataSpec(**data_kw), seed=args.seed, **kw)
 
 

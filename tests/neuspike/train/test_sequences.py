@@ -187,3 +187,27 @@ def test_resume_gives_the_same_weights_as_one_run(tmp_path):
     assert len(log) == 5 and log[0].startswith("step,loss")
     with pytest.raises(InputError, match="different spec"):
         train(half, run_dir=tmp_path / "one", shard_root=shards, export_dir=None, progress=False)
+
+
+def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
+    """A run continued from exported weights (no checkpoint) starts exactly there; its start's validation is the bar."""
+    from neuspike.weights import load_safetensors
+
+    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
+    spec = TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
+                     warmup=1, steps=2, val_every=1, checkpoint_every=1, precision="float32", lr_warmup_steps=1)
+    shards = tmp_path / "shards"
+    first = train(spec, run_dir=tmp_path / "a", shard_root=shards, export_dir=tmp_path / "w", progress=False)
+    weights = tmp_path / "w" / "firenet-sim.safetensors"
+    start = load_safetensors(str(weights))
+    later = dataclasses.replace(spec, steps=0, init_from=str(weights))
+    result = train(later, run_dir=tmp_path / "b", shard_root=shards, export_dir=tmp_path / "w2", progress=False)
+    state = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["module"]
+    assert set(state) == set(start)
+    for k in start:
+        assert torch.equal(state[k], start[k].to(state[k].dtype)), k
+    assert result["best"]["step"] == 0
+    assert result["best"]["val_ssim"] == pytest.approx(first["best"]["val_ssim"], abs=1e-6)
+    assert not (tmp_path / "w2").exists()  # nothing better than the start: nothing exported
+    with pytest.raises(InputError, match="safetensors"):
+        dataclasses.replace(spec, init_from="weights.pt")
