@@ -6,7 +6,8 @@ frame for one plane (256 planes); the event camera sees the 256 frames at their 
 
 Spike camera: planes/s of the compiled kernel (numba) on 1 and 2 threads, writing bool planes
 and bit-packed planes, and of the suite's NumPy path, beside a plain NumPy integrate-and-fire loop
-(the reference). Event camera: frames/s of the compiled backend (one thread, and with the worker
+(the reference); for context, the memory floor (reading the input frames once) and the kernel on
+one frame held for every plane (the same work without input traffic). Event camera: frames/s of the compiled backend (one thread, and with the worker
 thread) beside the NumPy path (the reference), without effects, with the v2e presets and with
 every effect. Every configuration is timed in turn within each repeat, so a change in the
 machine's load touches reference and candidate alike; the median is reported with its spread and
@@ -87,6 +88,8 @@ class Case:
     run: Callable[[], Any]
     count: Callable[[Any], int]
     setup: Callable[[], None] = lambda: None
+    #: a context row (not an implementation of the configuration: its output differs by design)
+    context: bool = False
 
 
 def _numba_threads(n: int) -> None:
@@ -119,7 +122,18 @@ def cases(frames: np.ndarray, times: np.ndarray) -> list[Case]:
         return once
 
     out.append(Case("spike", "no effects", "NumPy path", 1, spike("numpy", False), int))
+    # context for the verdicts: what reading the input costs at all, and the kernel without input traffic
+    out.append(Case("spike", "no effects", "floor: read the input", 1, lambda: float(frames.sum()), lambda _: 0,
+                    context=True))
     if NUMBA_AVAILABLE:
+        held = np.ascontiguousarray(frames[:1])
+
+        def held_once():
+            cam = SpikeCamera(w, h, light=1.0, threshold=1.0, rng=None, backend="numba")
+            return int(np.count_nonzero(cam.capture(held, hold_planes=frames.shape[0]).planes))
+
+        out.append(Case("spike", "no effects", "numba 1 thr, 1 frame held", 1, held_once, int,
+                        setup=lambda: _numba_threads(1), context=True))
         for threads in (1, 2):
             s = "s" if threads > 1 else ""
             out.append(Case("spike", "no effects", f"numba, {threads} thread{s}", threads, spike("numba", False), int,
@@ -170,7 +184,7 @@ def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRA
                      "seconds": med, "min": min(sec), "max": max(sec), "rate": frames / med,
                      "cpu_seconds": statistics.median(results[i]["cpu"]),
                      "unit": "planes/s" if case.sensor == "spike" else "frames/s",
-                     "count": results[i]["count"], "load_1min": statistics.median(results[i]["load"]),
+                     "count": results[i]["count"], "context": case.context, "load_1min": statistics.median(results[i]["load"]),
                      "width": width, "height": height, "frames": frames})
     return rows
 
@@ -229,7 +243,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['rate'] / ref['rate']:>5.2f}x {r['seconds']:>9.4f} {r['min']:>7.4f}-{r['max']:<7.4f} "
               f"{r['cpu_seconds']:>7.4f} {r['load_1min']:>5.2f} {r['count']:>13,} {what}")
     print("\n(x ref: against the first row of the same sensor and configuration, measured in this run; cpu s: "
-          "process CPU time, all threads, median; load: 1-minute load average while that row ran)")
+          "process CPU time, all threads, median; load: 1-minute load average while that row ran;\n"
+          " floor: summing the input frames once, the memory traffic every spike camera pays on this input, so "
+          "no implementation's rate exceeds it; 1 frame held: the compiled kernel on one frame held for every "
+          "plane, the same work without the input traffic)")
     print("verdicts:")
     for line in verdicts(rows):
         print(f"  {line}")
