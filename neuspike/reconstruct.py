@@ -25,6 +25,7 @@ from typing import Any, Sequence, TextIO
 import numpy as np
 
 from neuspike.atomic import write_bytes
+from neuspike.cli import ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.images import encode_png
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
@@ -79,17 +80,8 @@ def _split_methods(values: Sequence[str]) -> tuple[str, ...]:
     return tuple(names)
 
 
-class _UsageError(Exception):
-    """A command-line usage error (reported in one line, exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise _UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = ArgumentParser(
         prog="python -m neuspike.reconstruct",
         description=(
             "Reconstruct an image from a spike recording (Vidar .dat, or .npz holding a (T, H, W) 0/1\n"
@@ -298,7 +290,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-    except _UsageError as exc:
+    except UsageError as exc:
         print(f"error: {exc} (see --help)", file=sys.stderr)
         return 2
     except SystemExit as exc:  # --help

@@ -38,6 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from neuspike.cli import ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError
 
 __all__ = ["VideoSpec", "build_parser", "run", "main"]
@@ -73,17 +74,8 @@ class VideoSpec:
     progress: bool = True
 
 
-class _UsageError(Exception):
-    pass
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        raise _UsageError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = ArgumentParser(
         prog="python -m neuspike.video",
         description=(
             "Reconstruct a video from a spike recording (.dat, .npz), an event recording (.h5/.hdf5, .txt,\n"
@@ -375,7 +367,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-    except _UsageError as exc:
+    except UsageError as exc:
         print(f"error: {exc} (see --help)", file=sys.stderr)
         return 2
     except SystemExit as exc:  # --help
