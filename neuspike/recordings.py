@@ -383,16 +383,24 @@ def load_sample(
     )
 
 
-def _load_spikes(
-    path: Path, *, height: int | None, width: int | None, meta: dict[str, Any] | None,
-    rate_given: float | None, start_given: float | None, meta_key_s: float | None, plane: int | None,
-    at_s: float | None, window_planes: int | None, raw_width: int | None, gain: float | None,
-    info: dict[str, Any],
-) -> tuple[SpikeStream, float, float, float]:
-    """Read the spike window; return (stream, key_time_s, plane_rate_hz, file_start_s)."""
-    suffix = path.suffix.lower()
-    whole: SpikeStream | None = None
-    if suffix == ".dat":
+def spike_file_extent(
+    path: Path, *, height: int | None, width: int | None, raw_width: int | None,
+    rate_given: float | None, start_given: float | None,
+) -> tuple[SpikeStream | None, int, float, float]:
+    """A spike file's extent: ``(whole, planes, plane_rate_hz, start_s)``.
+
+    A ``.dat`` has no header: its size must be given, its planes are counted from the file's length
+    (``whole`` is ``None``: nothing is read). An ``.npz`` is read whole (``whole``); a size given
+    must match it. ``rate_given`` / ``start_given`` override the file's (a ``.dat``: 20 kHz from 0 s).
+
+    Raises
+    ------
+    InputError
+        A ``.dat`` without its size, ``raw_width`` for an ``.npz``, a size that does not match.
+    FormatError
+        A file holding no planes.
+    """
+    if path.suffix.lower() == ".dat":
         if height is None:
             raise InputError(
                 f"spike file {path}: a .dat file has no header; give its size (--height H --width W), "
@@ -400,9 +408,10 @@ def _load_spikes(
             )
         from neuspike.formats.vidar_dat import count_planes
 
+        whole = None
         total = int(count_planes(path, height=height, width=width, raw_width=raw_width))
         rate = rate_given or DEFAULT_PLANE_RATE_HZ
-        file_start_s = start_given or 0.0
+        start_s = start_given or 0.0
     else:
         if raw_width is not None:
             raise InputError("raw_width applies to .dat files only")
@@ -410,7 +419,7 @@ def _load_spikes(
 
         whole = read_spike_npz(path, plane_rate_hz=rate_given)
         rate = whole.plane_rate_hz
-        file_start_s = start_given if start_given is not None else whole.start_s
+        start_s = start_given if start_given is not None else whole.start_s
         if height is not None and (whole.height, whole.width) != (height, width):
             raise InputError(
                 f"spike file {path}: holds {whole.width}x{whole.height} planes, but the size given is {width}x{height}"
@@ -418,6 +427,18 @@ def _load_spikes(
         total = whole.num_planes
     if total < 1:
         raise FormatError(f"spike file {path}: holds no planes")
+    return whole, total, rate, start_s
+
+
+def _load_spikes(
+    path: Path, *, height: int | None, width: int | None, meta: dict[str, Any] | None,
+    rate_given: float | None, start_given: float | None, meta_key_s: float | None, plane: int | None,
+    at_s: float | None, window_planes: int | None, raw_width: int | None, gain: float | None,
+    info: dict[str, Any],
+) -> tuple[SpikeStream, float, float, float]:
+    """Read the spike window; return (stream, key_time_s, plane_rate_hz, file_start_s)."""
+    whole, total, rate, file_start_s = spike_file_extent(path, height=height, width=width, raw_width=raw_width,
+                                                         rate_given=rate_given, start_given=start_given)
     end_s = file_start_s + total / rate
 
     if plane is not None:

@@ -43,6 +43,7 @@ from neuspike.recordings import (
     SPIKE_SUFFIXES,
     meta_float,
     read_meta,
+    spike_file_extent,
     window_bounds,
 )
 from neuspike.sample import Sample
@@ -373,30 +374,11 @@ def open_recording(
     file_gain = file_threshold = None
     npz = None
     if sp is not None:
-        if sp.suffix.lower() == ".dat":
-            if height is None:
-                raise InputError(
-                    f"spike file {sp}: a .dat file has no header; give its size (--height H --width W), "
-                    "e.g. --height 250 --width 400 for a Vidar"
-                )
-            from neuspike.formats.vidar_dat import count_planes
-
-            num_planes = int(count_planes(sp, height=height, width=width, raw_width=raw_width))
-        else:
-            if raw_width is not None:
-                raise InputError("raw_width applies to .dat files only")
-            from neuspike.formats.spike_npz import read_spike_npz
-
-            npz = read_spike_npz(sp, plane_rate_hz=rate_given)
-            rate = npz.plane_rate_hz
-            start_s = start_given if start_given is not None else npz.start_s
-            if height is not None and (npz.height, npz.width) != (height, width):
-                raise InputError(f"spike file {sp}: holds {npz.width}x{npz.height} planes, but the size given is {width}x{height}")
+        npz, num_planes, rate, start_s = spike_file_extent(sp, height=height, width=width, raw_width=raw_width,
+                                                           rate_given=rate_given, start_given=start_given)
+        if npz is not None:
             height, width = npz.height, npz.width
-            num_planes = npz.num_planes
             file_gain, file_threshold = npz.gain, npz.threshold
-        if num_planes < 1:
-            raise FormatError(f"spike file {sp}: holds no planes")
     source = None
     if ev is not None:
         is_h5 = ev.suffix.lower() in (".h5", ".hdf5")
