@@ -35,8 +35,6 @@ Arithmetic (float32, in this order, so that any implementation can be checked bi
 from __future__ import annotations
 
 import math
-import os
-import threading
 import time
 from typing import Any, Iterable
 
@@ -45,6 +43,7 @@ import numpy as np
 from neuspike.checks import check_ndim, check_nonnegative, check_positive, check_positive_int, check_size
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
+from neuspike.parallel import KERNEL_LOCK, parallel_usable
 from neuspike.sensors.backends import resolve_backend
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
@@ -220,8 +219,9 @@ def integrate_and_fire(
     backend : {"auto", "numba", "numpy"}
         ``"numba"``: the fused compiled kernel on ``numba.get_num_threads()`` threads;
         ``"numpy"``: the plain NumPy plane loop; ``"auto"``: numba where it can be imported.
-        Same planes and charge, bit for bit. (A process forked after the kernel ran takes the
-        NumPy path: threading runtimes cannot start in such a child.)
+        Same planes and charge, bit for bit. (A process forked after a GNU OpenMP parallel region
+        ran takes the NumPy path: that runtime cannot start in such a child; see
+        :mod:`neuspike.parallel`.)
 
     Returns
     -------
@@ -273,28 +273,10 @@ def integrate_and_fire(
     return planes, charge
 
 
-# The compiled kernel's threads come from numba's threading layer. With GNU OpenMP (numba's "omp"
-# layer) a child forked after a parallel region ran cannot start one (the runtime terminates the
-# process), and numba's "workqueue" layer cannot take two parallel launches at once. So kernel calls
-# are serialised by a lock, and a process forked after a kernel ran takes the NumPy path (the same
-# planes). Spawned processes (the harness's pools) start clean and use the kernel.
-_KERNEL_LOCK = threading.Lock()
-_kernel_ran = False
-_forked_after_kernel = False
-
-
-def _note_fork() -> None:
-    global _forked_after_kernel
-    _forked_after_kernel = _forked_after_kernel or _kernel_ran
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_note_fork)
-
-
 def _runnable(engine: str) -> str:
-    """The backend that will actually run: ``"numpy"`` for ``"numba"`` in a child forked after a kernel ran."""
-    return "numpy" if engine == "numba" and _forked_after_kernel else engine
+    """The backend that will actually run: ``"numpy"`` for ``"numba"`` where a parallel kernel cannot
+    start (a child forked after a GNU OpenMP region ran in its parent: :mod:`neuspike.parallel`)."""
+    return "numpy" if engine == "numba" and not parallel_usable() else engine
 
 
 #: Most pixels per band of the compiled kernel: a band's charge (4 bytes a pixel) stays in the L2
@@ -336,10 +318,8 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
         out = np.empty((k_frames * hold, h, w), np.bool_)
         kernel = spike_kernels.fire_planes
     negatives = np.zeros(-(-h // rows), np.int64)
-    global _kernel_ran
-    _kernel_ran = True
     if frames.dtype == np.float32:
-        with _KERNEL_LOCK:
+        with KERNEL_LOCK:
             kernel(np.ascontiguousarray(frames), hold, light, threshold, charge, dark, rows, out, negatives)
     else:
         # other float types go through a small float32 buffer, a few frames at a time: the kernel
@@ -351,7 +331,7 @@ def _integrate_compiled(frames: np.ndarray, hold: int, light: np.float32, thresh
             k1 = min(k_frames, k0 + step)
             chunk = staging[:k1 - k0]
             np.copyto(chunk, frames[k0:k1], casting="same_kind")
-            with _KERNEL_LOCK:
+            with KERNEL_LOCK:
                 kernel(chunk, hold, light, threshold, charge, dark, rows, out[k0 * hold:k1 * hold], counts)
             negatives += counts
     # NaN and +inf cannot leave the charge, so a finite charge and no negative value mean valid input
