@@ -11,8 +11,10 @@ noise, seeds, effects), sensor, harness version and event history (the simulator
 given these, so every folder scored its methods on the same recordings). Their methods must not
 overlap, and every folder must be complete (a ``results.csv`` with every cell). The output holds
 ``results.csv`` (sorted as a sweep's), ``config.json`` (the sweep with the union of the methods, and
-``merged_from``: each folder's methods and configuration) and ``metadata.json`` (the first folder's
-provenance, each folder's own under ``merged_from``); then the report is rebuilt from them.
+``merged_from``: each folder's methods and configuration), ``metadata.json`` (the first folder's
+provenance, each folder's own under ``merged_from``) and ``images/`` (every folder's saved
+reconstructions side by side, so the report's grids show every method); then the report is rebuilt
+from them.
 
 Writing is atomic per file; the output folder may be one of the inputs only if it is the first.
 
@@ -30,7 +32,7 @@ from typing import Any, Sequence
 import pandas as pd
 
 from bench.results import read_csv, sort_rows, to_csv_text
-from neuspike.atomic import write_json, write_text
+from neuspike.atomic import write_bytes, write_json, write_text
 from neuspike.errors import InputError
 
 __all__ = ["merge_sweeps", "main"]
@@ -113,10 +115,25 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path]) -> pd.DataFrame
     metadata["merged_from"] = [{"folder": str(f), **m} for f, (_, m, _) in zip(folders, loaded)]
 
     out.mkdir(parents=True, exist_ok=True)
+    _merge_images(out / "images", [f / "images" for f in folders])
     write_text(out / "results.csv", to_csv_text(merged))
     write_json(out / "config.json", {"sweep": sweep, "merged_from": sources})
     write_json(out / "metadata.json", metadata)
     return merged
+
+
+def _merge_images(target: Path, sources: Sequence[Path]) -> None:
+    """Copy each source's ``<scene>/<axis=value>/<method>.png`` into ``target`` (methods are disjoint;
+    the ground truth ``gt.png`` is the same image in every folder, the first one's is kept)."""
+    for src in sources:
+        if not src.is_dir() or src.resolve() == target.resolve():
+            continue
+        for png in sorted(src.rglob("*.png")):
+            dest = target / png.relative_to(src)
+            if dest.exists() and png.name == "gt.png":
+                continue
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes(dest, png.read_bytes())
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -412,22 +412,31 @@ def test_reconstructions_of_the_swept_axis_are_saved_for_the_report(plugin, tmp_
 def test_merged_sweeps_equal_one_sweep_of_all_methods(plugin, tmp_path):
     from bench.merge import main as merge_main, merge_sweeps
 
+    import dataclasses
+
     cache = str(tmp_path / "cache")
-    one = run_sweep(tiny_spec(["ht-mean", "ht-mean-x2"]), tmp_path / "one", quiet(plugin, cache_dir=cache))
-    a = run_sweep(tiny_spec(["ht-mean"]), tmp_path / "a", quiet(plugin, cache_dir=cache))
-    b = run_sweep(tiny_spec(["ht-mean-x2"]), tmp_path / "b", quiet(plugin, cache_dir=cache))
+
+    def spec(methods, **kw):  # a light sweep, so that images are kept
+        return dataclasses.replace(tiny_spec(methods, **kw), axis="light")
+
+    one = run_sweep(spec(["ht-mean", "ht-mean-x2"]), tmp_path / "one", quiet(plugin, cache_dir=cache))
+    a = run_sweep(spec(["ht-mean"]), tmp_path / "a", quiet(plugin, cache_dir=cache))
+    b = run_sweep(spec(["ht-mean-x2"]), tmp_path / "b", quiet(plugin, cache_dir=cache))
     assert one.exit_code == a.exit_code == b.exit_code == 0
     merged = merge_sweeps(tmp_path / "m", [tmp_path / "a", tmp_path / "b"])
     whole = read_csv(one.results_path)
     # the cell id hashes the sweep's method list, so it differs; every number is the same
     same_numbers(merged.drop(columns="cell"), whole.drop(columns="cell"))
     assert read_csv(tmp_path / "m" / "results.csv").equals(merged)
+    images = {p.relative_to(tmp_path / "m" / "images").as_posix() for p in (tmp_path / "m" / "images").rglob("*.png")}
+    singles = {p.relative_to(tmp_path / "one" / "images").as_posix() for p in (tmp_path / "one" / "images").rglob("*.png")}
+    assert images == singles and any(p.endswith("ht-mean-x2.png") for p in images)
     config = json.loads((tmp_path / "m" / "config.json").read_text())
     assert config["sweep"]["methods"] == ["ht-mean", "ht-mean-x2"] and len(config["merged_from"]) == 2
 
     # what does not fit is refused, naming the problem, and nothing is written
     assert merge_main([str(tmp_path / "x"), str(tmp_path / "a"), str(tmp_path / "a"), "--no-report"]) == 2
-    other = run_sweep(tiny_spec(["ht-mean-x2"], lights=(0.5,)), tmp_path / "c", quiet(plugin, cache_dir=cache))
+    other = run_sweep(spec(["ht-mean-x2"], lights=(0.5,)), tmp_path / "c", quiet(plugin, cache_dir=cache))
     assert other.exit_code == 0
     with pytest.raises(InputError, match="different sweep.*grid"):
         merge_sweeps(tmp_path / "y", [tmp_path / "a", tmp_path / "c"])
