@@ -163,11 +163,17 @@ def test_loss_falls_on_a_fixed_batch(tiny):
     assert losses[-1] < 0.8 * losses[0], losses
 
 
+def _tiny_run(steps: int, val_every: int) -> TrainSpec:
+    """A FireNet run on two 32x32 sequences of 3 windows: seconds on the CPU."""
+    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
+    return TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
+                     warmup=1, steps=steps, val_every=val_every, checkpoint_every=1, precision="float32",
+                     lr_warmup_steps=1)
+
+
 def test_resume_gives_the_same_weights_as_one_run(tmp_path):
     """Two steps, stop, two more (resumed from the checkpoint) == four steps in one go: same data order, same bytes."""
-    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
-    spec = TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
-                     warmup=1, steps=4, val_every=2, checkpoint_every=1, precision="float32", lr_warmup_steps=1)
+    spec = _tiny_run(steps=4, val_every=2)
     shards = tmp_path / "shards"
     one = train(spec, run_dir=tmp_path / "one", shard_root=shards, export_dir=tmp_path / "w1", progress=False)
     half = dataclasses.replace(spec, steps=2)
@@ -193,9 +199,7 @@ def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
     """A run continued from exported weights (no checkpoint) starts exactly there; its start's validation is the bar."""
     from neuspike.weights import load_safetensors
 
-    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
-    spec = TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
-                     warmup=1, steps=2, val_every=1, checkpoint_every=1, precision="float32", lr_warmup_steps=1)
+    spec = _tiny_run(steps=2, val_every=1)
     shards = tmp_path / "shards"
     first = train(spec, run_dir=tmp_path / "a", shard_root=shards, export_dir=tmp_path / "w", progress=False)
     weights = tmp_path / "w" / "firenet-sim.safetensors"
