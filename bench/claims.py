@@ -205,8 +205,7 @@ def events_miss_static_texture(frame: pd.DataFrame) -> Verdict:
     still scenes everywhere, fan scenes outside the blades). The claim holds when the event
     family's mean is below :data:`STATIC_TEXTURE_FACTOR` times the spike family's.
     """
-    rows = ok_rows(frame, "static_texture")
-    rows = rows[rows["value"].notna()] if not rows.empty else rows
+    rows = ok_rows(frame, "static_texture")  # ok rows with a value: cells without a static region drop out
     if rows.empty:
         return UNCHECKED, ("no static-texture values: the results hold no scene with a static region "
                            "(still or fan scenes) or predate the measure")
