@@ -32,14 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=str(HERE), help="where the panels and the CSV go")
     args = p.parse_args(argv)
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import pandas as pd
 
     from neuspike.atomic import write_text
     from neuspike.metrics import no_reference
+    from neuspike.video.writers import label_image, tile_row, to_uint8, write_png
 
     out = Path(args.out)
     rows = []
@@ -52,17 +49,11 @@ def main(argv: list[str] | None = None) -> int:
             subprocess.run([sys.executable, "-m", "neuspike.reconstruct", "--events", str(rec), "--method",
                             ",".join(METHODS), "--weights", args.weights, "--out", tmp], check=True)
             images = {m: np.load(Path(tmp) / f"{m}.npy") for m in METHODS}
-        fig, axes = plt.subplots(1, len(METHODS), figsize=(4 * len(METHODS), 3.4), dpi=100)
-        for ax, m in zip(axes, METHODS):
-            ax.imshow(images[m], cmap="gray", vmin=0, vmax=1)
-            ax.set_title(m)
-            ax.axis("off")
-            rows.append({"recording": rec.name, "method": m,
-                         **{k: round(float(v), 6) for k, v in no_reference(images[m]).items()}})
-        fig.suptitle(f"{rec.name}: no ground truth", fontsize=10)
-        fig.tight_layout()
-        fig.savefig(out / f"realdata_{NAMES[rec.name]}.png")
-        plt.close(fig)
+        # one labelled row of the methods' images (the video contact sheet's tiles)
+        write_png(out / f"realdata_{NAMES[rec.name]}.png",
+                  tile_row([label_image(to_uint8(images[m]), m) for m in METHODS]))
+        rows += [{"recording": rec.name, "method": m,
+                  **{k: round(float(v), 6) for k, v in no_reference(images[m]).items()}} for m in METHODS]
     frame = pd.DataFrame(rows)
     write_text(out / "realdata_noreference.csv", frame.to_csv(index=False, lineterminator="\n"))
     print(frame.to_string(index=False))

@@ -28,14 +28,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--recording", default=str(HERE.parents[2] / "shared" / "realdata" / "spike" / "uhsr_helicopter.npz"))
     args = p.parse_args(argv)
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import pandas as pd
 
     from neuspike.atomic import write_text
     from neuspike.metrics import no_reference
+    from neuspike.video.writers import label_image, tile_row, to_uint8, write_png
 
     rec = Path(args.recording)
     out = HERE / "realdata"
@@ -53,15 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         ms = float(line.rsplit(" ms;", 1)[0].rsplit(";", 1)[1])
         rows.append({"method": m, "recording": rec.name, "normalisation": norm, "ms": round(ms, 1),
                      **{k: round(float(v), 6) for k, v in no_reference(images[m]).items()}})
-    fig, axes = plt.subplots(1, len(METHODS), figsize=(3.2 * len(METHODS), 3.5), dpi=100)
-    for ax, m in zip(axes, METHODS):
-        ax.imshow(images[m], cmap="gray", vmin=0, vmax=1)
-        ax.set_title(m, fontsize=10)
-        ax.axis("off")
-    fig.suptitle(f"{rec.name}: no ground truth", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(out / "contact_sheet.png")
-    plt.close(fig)
+    write_png(out / "contact_sheet.png", tile_row([label_image(to_uint8(images[m]), m) for m in METHODS]))
     frame = pd.DataFrame(rows)
     write_text(out / "measures.csv", frame.to_csv(index=False, lineterminator="\n"))
     print(frame.to_string(index=False))
