@@ -130,6 +130,9 @@ class TrainSpec:
     warmup: int = 2
     lr: float = 2e-4
     lr_warmup_steps: int = 50
+    #: None: the rate stays at ``lr`` after the warm-up (the first stages were trained so); a value:
+    #: cosine decay from ``lr`` to ``lr_min`` at ``steps``, which a run of fixed length ends better with
+    lr_min: float | None = None
     l1: float = 1.0
     ssim: float = 1.0
     temporal: float = 1.0
@@ -153,6 +156,8 @@ class TrainSpec:
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
+        if self.lr_min is not None and not 0 <= self.lr_min <= self.lr:
+            raise InputError(f"lr_min: expected 0 <= lr_min <= lr ({self.lr}), got {self.lr_min}")
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -585,7 +590,7 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
             if max_minutes is not None and time.perf_counter() - started > 60 * max_minutes:
                 break
             t0 = time.perf_counter()
-            lr = spec.lr * min(1.0, (step + 1) / max(1, spec.lr_warmup_steps))
+            lr = learning_rate(spec, step)
             for g in opt.param_groups:
                 g["lr"] = lr
             batch = make_batch(train_shard, derive_rng(spec.seed, "batch", step), batch=spec.batch, crop=spec.crop,
@@ -619,6 +624,18 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
     if bar is not None:
         bar.close()
     return {"step": step, "best": best, "wall_s": wall_s}
+
+
+def learning_rate(spec: TrainSpec, step: int) -> float:
+    """The rate of step ``step`` (from 0): linear warm-up over ``lr_warmup_steps``, then ``lr``, or a
+    cosine from ``lr`` down to ``lr_min`` at ``steps`` when ``lr_min`` is set."""
+    warm = max(1, spec.lr_warmup_steps)
+    if step < warm:
+        return spec.lr * (step + 1) / warm
+    if spec.lr_min is None:
+        return spec.lr
+    frac = min(1.0, (step - warm) / max(1, spec.steps - warm))
+    return spec.lr_min + 0.5 * (spec.lr - spec.lr_min) * (1.0 + math.cos(math.pi * frac))
 
 
 def export(module: torch.nn.Module, spec: TrainSpec, best: dict[str, Any], *, step: int, wall_s: float,
@@ -676,7 +693,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-minutes", type=float, default=None, help="stop after this many minutes (resume later)")
     p.add_argument("--crop", type=int, default=None)
     p.add_argument("--batch", type=int, default=None)
-    p.add_argument("--lr", type=float, default=None)
+    p.add_argument("--lr", type=float, default=None, help="peak learning rate (after a 50-step warm-up)")
+    p.add_argument("--lr-min", type=float, default=None,
+                   help="decay the rate along a cosine to this value at --steps (default: constant rate)")
+    p.add_argument("--val-every", type=int, default=None, help="validate (and export a new best) every N steps")
     p.add_argument("--train-items", type=int, default=None, help="simulated training sequences")
     p.add_argument("--val-items", type=int, default=None, help="simulated validation sequences")
     p.add_argument("--windows", type=int, default=None, help="event windows per sequence")
@@ -704,7 +724,7 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         data_kw.update(size=48, windows=4)
     if args.quick:
         kw["length"] = 4
-    for name in ("steps", "crop", "batch", "lr", "train_items", "val_items", "length"):
+    for name in ("steps", "crop", "batch", "lr", "lr_min", "train_items", "val_items", "val_every", "length"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.windows is not None:

@@ -20,6 +20,7 @@ from neuspike.train.sequences import (
     TrainSpec,
     backward_flow,
     build_shard,
+    learning_rate,
     load_shard,
     make_batch,
     run_sequence,
@@ -215,3 +216,28 @@ def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
     assert not (tmp_path / "w2").exists()  # nothing better than the start: nothing exported
     with pytest.raises(InputError, match="safetensors"):
         dataclasses.replace(spec, init_from="weights.pt")
+
+
+def test_learning_rate_warms_up_then_holds_or_follows_a_cosine():
+    """Constant after the warm-up without lr_min; with it, the cosine's closed form: peak, half-way mean, floor."""
+    flat = TrainSpec(method="e2vid", lr=2e-4, lr_warmup_steps=50, steps=1050)
+    assert learning_rate(flat, 0) == pytest.approx(2e-4 / 50)
+    assert learning_rate(flat, 49) == pytest.approx(2e-4)
+    assert learning_rate(flat, 1049) == pytest.approx(2e-4)
+    cos = dataclasses.replace(flat, lr_min=1e-5)
+    assert learning_rate(cos, 49) == learning_rate(flat, 49)  # same warm-up
+    assert learning_rate(cos, 50) == pytest.approx(2e-4)
+    assert learning_rate(cos, 550) == pytest.approx((2e-4 + 1e-5) / 2)  # half-way down the cosine
+    assert learning_rate(cos, 1050) == pytest.approx(1e-5)
+    rates = [learning_rate(cos, k) for k in range(50, 1051)]
+    assert all(a >= b for a, b in zip(rates, rates[1:]))
+    with pytest.raises(InputError, match="lr_min"):
+        dataclasses.replace(flat, lr_min=3e-4)
+
+
+def test_a_spec_frozen_before_lr_min_reads_as_a_constant_rate():
+    """Run folders of the first stages hold specs without lr_min: they read back equal, constant rate."""
+    spec = TrainSpec(method="e2vid")
+    old = spec.as_dict()
+    del old["lr_min"]
+    assert TrainSpec.from_dict(old) == spec and spec.lr_min is None
