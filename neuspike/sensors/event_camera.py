@@ -56,11 +56,12 @@ Implementation
     Two backends give the same events, byte for byte (``backend=``). On the compiled one
     (:mod:`neuspike.sensors.event_kernels`, numba) a single pass per interval finishes the
     lin-log (the ``log`` itself stays NumPy's), runs ``bandwidth`` and ``leak``, and lists the
-    crossing pixels with their event counts; without ``shot_noise`` and ``refractory`` a second
-    compiled pass builds the interval's keys (below), NumPy's sort orders them and a third pass
-    decodes them into the output, optionally in a worker thread (``threads=2``); with either of
-    those stages the crossing pixels go on through the NumPy code below. ``backend="numpy"`` (the
-    reference, and the fallback where numba cannot be imported) runs everything in NumPy.
+    crossing pixels with their event counts; a second compiled pass builds the interval's keys
+    (below) with the ``refractory`` filter, a third the keys of the pixels with ``shot_noise``
+    (whose draws stay NumPy's, from the camera's generator), NumPy's sort orders the keys and a
+    last pass decodes them into the output, optionally in a worker thread (``threads=2``).
+    ``backend="numpy"`` (the reference, and the fallback where numba cannot be imported) runs
+    everything in NumPy.
 
     On the NumPy path, per sample interval every pixel is updated with whole-array float32 operations into
     preallocated buffers; only the pixels that cross a threshold go further. Each of their
@@ -109,8 +110,6 @@ _I01_SCALE = 275.0
 #: Order in which declared stages are listed in a recording's metadata.
 _STAGE_ORDER = ("threshold_mismatch", "bandwidth", "leak", "shot_noise", "refractory")
 _RANDOM_STAGES = ("threshold_mismatch", "leak", "shot_noise")
-#: Stages the compiled backend runs; a camera declaring any other runs the NumPy path.
-_COMPILED_STAGES = frozenset({"threshold_mismatch", "bandwidth", "leak"})
 
 _LIN_SLOPE = np.float32(np.log(DARK_FLOOR_8BIT) / DARK_FLOOR_8BIT)
 #: Finest resolution of a crossing time, as a power of two of the sample interval.
@@ -395,8 +394,9 @@ class EventCamera:
             listing the stages that ran (always ``dvs_pixel``, the ideal pixel, first) and the
             wall time charged to each; the frozen draws of ``threshold_mismatch`` and ``leak``
             (made at construction) are charged to the capture that initialises the camera. On
-            the numba backend ``bandwidth`` and ``leak`` run inside the compiled pixel pass: their
-            entries say ``"fused_into": "dvs_pixel"`` and their time is part of ``dvs_pixel``'s.
+            the numba backend ``bandwidth``, ``leak`` and ``refractory`` run inside the compiled
+            passes: their entries say ``"fused_into": "dvs_pixel"`` and their time is part of
+            ``dvs_pixel``'s (``shot_noise`` keeps its own: its draws and its pixels' events).
             ``dvs_pixel``'s params name the backend.
 
         Raises
@@ -477,12 +477,10 @@ class _Capture:
         self.shot_noise = "shot_noise" in eff
         self.leak = cam._leak_per_s
         self.seconds = dict.fromkeys(["dvs_pixel", *(name for name in _STAGE_ORDER if name in eff)], 0.0)
-        # "numba": the compiled pixel pass always; the compiled event building too unless shot
-        # noise or a refractory period is declared (those events are built by the NumPy code)
+        # "numba": the compiled pixel pass and event building, every stage
         self.pixel_kernel = cam.backend == "numba"
-        self.compiled = self.pixel_kernel and set(eff) <= _COMPILED_STAGES
-        # stages that run inside the compiled pixel pass: their time is part of dvs_pixel's
-        self.fused = frozenset({"bandwidth", "leak"} & set(eff)) if self.pixel_kernel else frozenset()
+        # stages that run inside the compiled passes: their time is part of dvs_pixel's
+        self.fused = frozenset({"bandwidth", "leak", "refractory"} & set(eff)) if self.pixel_kernel else frozenset()
         self.stage = "dvs_pixel"
         self.stage_t0 = time.perf_counter()
         self.luts = cam._luts()
@@ -538,7 +536,7 @@ class _Capture:
         if self.threads > 1 and frames.shape[0] - k0 > 1:
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="neuspike-events")
         try:
-            if self.compiled:
+            if self.pixel_kernel:
                 self.loop_compiled(frames, times, k0, sig, mem, t_prev)
             else:
                 self.loop(frames, times, k0, sig, mem, t_prev)
@@ -551,7 +549,7 @@ class _Capture:
         cam._last_emit_s = last_emit
 
     def loop_compiled(self, frames, times, k0, sig, mem, t_prev) -> None:
-        """:meth:`loop` for the compiled backend (no shot noise, no refractory period)."""
+        """:meth:`loop` for the compiled backend (every stage; the same events)."""
         from neuspike.sensors import event_kernels
 
         cam = self.cam
@@ -559,10 +557,36 @@ class _Capture:
         # key buffers used in turn: with a worker thread, one is sorted while the next is filled
         buffers = [np.empty(0, np.int64), np.empty(0, np.int64)]
         jobs = 0
-        for k in range(k0, frames.shape[0]):
+        last_emit, period = self.last_emit, self.refractory_s or 0.0
+        no_noise = np.empty(0, np.int64)
+        # the log of the next sample is taken by the worker thread (NumPy releases the GIL) while
+        # this one runs the compiled passes of the current interval: two buffers in turn
+        logs = [self.log_max, np.empty_like(self.log_max)] if self.pool is not None else [self.log_max]
+        k_end = frames.shape[0]
+        next_log = self.pool.submit(self.log_of, frames[k0], logs[k0 & 1]) if self.pool is not None else None
+        for k in range(k0, k_end):
             t_k = float(times[k])
             dt = t_k - t_prev
-            n_active, n_events, c_max = self.pixel_pass(frames[k], dt, sig, mem, spare)
+            if next_log is not None:
+                log_max = next_log.result()
+                # the other buffer's last reader was the previous interval's pixel pass, finished
+                next_log = self.pool.submit(self.log_of, frames[k + 1], logs[(k + 1) & 1]) if k + 1 < k_end else None
+            else:
+                log_max = self.log_of(frames[k], logs[0])
+            n_active, n_events, c_max = self.pixel_pass(frames[k], dt, sig, mem, spare, log_max)
+            q_one = self.fraction_unit(t_prev, dt)
+            noise_keys, noisy = None, no_noise
+            if self.shot_noise:
+                self.switch("shot_noise")
+                drawn = self.draw_shot_noise(frames[k], dt)
+                if drawn is not None:
+                    pix_n, f_n, on_n = drawn
+                    order = np.argsort(pix_n + f_n)  # pixel, then time (f_n < 1), as noise_pixels
+                    noise_keys, noisy = event_kernels.noise_keys(
+                        pix_n[order], f_n[order], on_n[order], sig, mem, self.d1, self.leak, dt, cam._th_on,
+                        cam._th_off, q_one, cam._pix_bits, last_emit, period, t_prev, dt / q_one)
+                    n_events += noise_keys.shape[0]
+                self.switch("dvs_pixel")
             if n_events:
                 slot = jobs & 1
                 while len(self.pending) > 1:  # the job two back read this slot's buffer
@@ -570,10 +594,17 @@ class _Capture:
                 if buffers[slot].shape[0] < n_events:
                     buffers[slot] = np.empty(2 * n_events, np.int64)
                 keys = buffers[slot][:n_events]
-                q_one = self.fraction_unit(t_prev, dt)
-                event_kernels.interval_keys(self.active, n_active, c_max, self.d1, sig, mem, self.leak,
-                                            np.float32(dt), cam._symmetric, cam._th_on, cam._th_off, q_one,
-                                            cam._pix_bits, keys)
+                # an upper bound: noise pixels' crossings and refractory drops are not in the key set
+                count = event_kernels.interval_keys(
+                    self.active, n_active, c_max, self.d1, sig, mem, self.leak, np.float32(dt), cam._symmetric,
+                    cam._th_on, cam._th_off, q_one, cam._pix_bits, keys, noisy, last_emit, period, t_prev,
+                    dt / q_one, last_emit is not None and dt < period)
+                if noise_keys is not None:
+                    keys[count:count + noise_keys.shape[0]] = noise_keys
+                    count += noise_keys.shape[0]
+                keys = keys[:count]
+                n_events = count
+            if n_events:
                 if self.out.would_grow(n_events):
                     self.drain()  # no write may be pending into arrays about to be replaced
                 outputs = self.out.extend(n_events)
@@ -596,18 +627,24 @@ class _Capture:
         keys.sort()  # the keys are distinct integers up to duplicates: the NumPy path's order exactly
         event_kernels.write_events(keys, self.cam._pix_bits, self.cam.width, t_a, scale, *outputs)
 
-    def pixel_pass(self, radiance, dt, sig, mem, sig_new):
+    def log_of(self, radiance: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``log(max(radiance, floor))`` into ``out``: NumPy's float32 log (not the C library's)."""
+        np.maximum(radiance, self.floor, out=out)
+        return np.log(out, out=out)
+
+    def pixel_pass(self, radiance, dt, sig, mem, sig_new, log_max=None):
         """Compiled pixel update of one interval (lin-log, bandwidth, leak, ``d1``, crossing pixels).
 
-        Fills ``sig_new``, ``self.d1`` and ``self.active``, leaks ``mem``; returns
-        ``(number of crossing pixels, their events, largest crossing count)``.
+        ``log_max``: :meth:`log_of` the radiance, when already taken. Fills ``sig_new``, ``self.d1``
+        and ``self.active``, leaks ``mem``; returns ``(number of crossing pixels, their events,
+        largest crossing count)``.
         """
         from neuspike.sensors import event_kernels
 
         cam = self.cam
         # the log stays in NumPy (its float32 log is not the C library's); the rest is compiled
-        log_max = np.maximum(radiance, self.floor, out=self.log_max)
-        np.log(log_max, out=log_max)
+        if log_max is None:
+            log_max = self.log_of(radiance, self.log_max)
         gain = offset = np.float32(0.0)
         clip = False
         bandwidth = self.bandwidth_hz is not None

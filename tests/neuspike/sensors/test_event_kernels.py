@@ -125,3 +125,32 @@ def test_a_pixel_whose_log_intensity_does_not_change_across_a_crossing_gives_num
     assert len(a) > 0
     for field in ("t_s", "x", "y", "p"):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
+
+
+@pytest.mark.parametrize("period_s", [5e-5, 2e-4, 1e-3])  # longer than, equal to and shorter than... the interval
+@pytest.mark.parametrize("seed", [0, 1])
+def test_same_events_with_dense_shot_noise_refractory_and_many_crossings(period_s, seed):
+    """The compiled shot-noise and refractory stages against the NumPy path where they work hardest:
+    several noise events per pixel and interval, flashes of many crossings, asymmetric thresholds, a
+    refractory period shorter than, equal to and longer than the sample interval (2e-4 s)."""
+    frames, times = moving_scene(np.random.default_rng(20 + seed), k=20)
+    frames[6] *= 30.0
+    frames[12] *= 0.02
+    effects = (effect("threshold_mismatch", sigma=0.1), effect("leak", rate_hz=20.0),
+               effect("shot_noise", rate_hz=4000.0), effect("refractory", period_s=period_s))
+    ref_cam, *ref = captures("numpy", effects, frames, times, threshold_on=0.12, threshold_off=0.3)
+    cam, *got = captures("numba", effects, frames, times, threshold_on=0.12, threshold_off=0.3)
+    for a, b in zip(got, ref):
+        assert events_of(a) == events_of(b)
+    assert cam._mem.tobytes() == ref_cam._mem.tobytes()
+    assert cam._last_emit_s.tobytes() == ref_cam._last_emit_s.tobytes()
+    _, *unfiltered = captures("numpy", effects[:3], frames, times, threshold_on=0.12, threshold_off=0.3)
+    assert sum(map(len, ref)) < sum(map(len, unfiltered))  # the period did drop events
+
+
+def test_shot_noise_stage_keeps_its_own_time_and_refractory_is_fused():
+    frames, times = moving_scene(np.random.default_rng(2), k=6)
+    _, s, _ = captures("numba", CONFIGS["every effect"], frames, times)
+    by_name = {x["name"]: x for x in s.meta["stages"]}
+    assert by_name["refractory"]["fused_into"] == "dvs_pixel"
+    assert "fused_into" not in by_name["shot_noise"] and by_name["shot_noise"]["seconds"] > 0
