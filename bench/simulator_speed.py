@@ -9,7 +9,11 @@ and bit-packed planes, and of the suite's NumPy path, beside a plain NumPy integ
 (the reference); for context, the memory floor (reading the input frames once) and the kernel on
 one frame held for every plane (the same work without input traffic). Event camera: frames/s of the compiled backend (one thread, and with the worker
 thread) beside the NumPy path (the reference), without effects, with the v2e presets and with
-every effect. Every configuration is timed in turn within each repeat, so a change in the
+every effect. Whole window: one sample of the sweep's default cell (``pan`` over ``camera``, L
+1/4, S 128, the harness's default effects; render + both cameras, ``simulate_sample``) per second
+on one thread, at 128x128 (the training size) and at 400x250, beside the same window with every
+stage on its NumPy reference path (scene samplers and both cameras).
+Every configuration is timed in turn within each repeat, so a change in the
 machine's load touches reference and candidate alike; the median is reported with its spread and
 the 1-minute load average. Each target ends in a one-line verdict (met / missed, with the ratio).
 
@@ -19,12 +23,13 @@ the 1-minute load average. Each target ends in a one-line verdict (met / missed,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import platform
 import statistics
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -54,7 +59,12 @@ TARGETS = (
     ("spike", "no effects", "numba, 1 thread", "plain NumPy loop", 2.0),
     ("event", "no effects", "numba, best", "NumPy path (today's)", 2.0),
     ("event", "every effect", "numba, best", "NumPy path (today's)", 2.0),
+    ("window", "400x250", "compiled, 1 thread", "NumPy reference paths", 3.0),
 )
+#: Whole windows per second on one thread at the training size (an absolute target: a training
+#: step must never wait for data).
+WINDOW_RATE_TARGET = ("window", "128x128", "compiled, 1 thread", 50.0)
+WINDOW_SIZES = ((128, 128), (400, 250))
 
 
 def standard_input(width: int, height: int, frames: int = FRAMES) -> tuple[np.ndarray, np.ndarray]:
@@ -90,6 +100,8 @@ class Case:
     setup: Callable[[], None] = lambda: None
     #: a context row (not an implementation of the configuration: its output differs by design)
     context: bool = False
+    #: items per run (None: the input's frames); a whole-window case makes one window per run
+    items: int | None = None
 
 
 def _numba_threads(n: int) -> None:
@@ -158,10 +170,56 @@ def cases(frames: np.ndarray, times: np.ndarray) -> list[Case]:
     return out
 
 
-def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRAMES) -> list[dict]:
+@contextlib.contextmanager
+def numpy_reference_paths() -> Iterator[None]:
+    """Every simulator stage on its NumPy reference path: both cameras and the scene samplers."""
+    from unittest import mock
+
+    import neuspike.scenes.sampling as sampling
+    import neuspike.sensors.event_camera as event_camera
+    import neuspike.sensors.spike_camera as spike_camera
+
+    def numpy_only(backend: str) -> str:
+        return "numpy"
+
+    with mock.patch.object(event_camera, "resolve_backend", numpy_only), \
+            mock.patch.object(spike_camera, "resolve_backend", numpy_only), \
+            mock.patch.object(sampling, "_kernels", None):
+        yield
+
+
+def window_cases(sizes=WINDOW_SIZES) -> list[Case]:
+    """One simulated window of the sweep's default cell per run, compiled and on the reference paths."""
+    from bench.grid import DEFAULT_EFFECTS
+    from neuspike.conditions import Condition
+    from neuspike.simulate import SensorConfig, simulate_sample
+
+    condition = Condition(light=0.25, motion=128, effects=DEFAULT_EFFECTS)
+    out = []
+    for w, h in sizes:
+        spec = SceneSpec(kind="pan", image="camera", size=(w, h))
+
+        def once(spec=spec):
+            sample = simulate_sample(spec, condition, sensor=SensorConfig(), seed=0)
+            return len(sample.events)
+
+        def reference(once=once):
+            with numpy_reference_paths():
+                return once()
+
+        label = f"{w}x{h}"
+        out.append(Case("window", label, "NumPy reference paths", 1, reference, int, items=1))
+        if NUMBA_AVAILABLE:
+            out.append(Case("window", label, "compiled, 1 thread", 1, once, int, setup=lambda: _numba_threads(1),
+                            items=1))
+    return out
+
+
+def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRAMES,
+        window_sizes=WINDOW_SIZES) -> list[dict]:
     """Time every case ``repeats`` times, round-robin; one row per case with the median rate."""
     images, times = standard_input(width, height, frames)
-    all_cases = cases(images, times)
+    all_cases = cases(images, times) + window_cases(window_sizes)
     previous = _get_numba_threads()
     results: dict[int, dict[str, Any]] = {}
     for i, case in enumerate(all_cases):  # warm-up: compilation, caches, first-touch allocations
@@ -181,12 +239,17 @@ def run(width: int = 400, height: int = 250, repeats: int = 7, frames: int = FRA
         sec = results[i]["seconds"]
         med = statistics.median(sec)
         rows.append({"sensor": case.sensor, "config": case.config, "impl": case.impl, "threads": case.threads,
-                     "seconds": med, "min": min(sec), "max": max(sec), "rate": frames / med,
+                     "seconds": med, "min": min(sec), "max": max(sec),
+                     "rate": (frames if case.items is None else case.items) / med,
                      "cpu_seconds": statistics.median(results[i]["cpu"]),
-                     "unit": "planes/s" if case.sensor == "spike" else "frames/s",
+                     "unit": {"spike": "planes/s", "event": "frames/s"}.get(case.sensor, "windows/s"),
                      "count": results[i]["count"], "context": case.context, "load_1min": statistics.median(results[i]["load"]),
                      "width": width, "height": height, "frames": frames})
     return rows
+
+
+def _rate(rate: float, unit: str) -> str:
+    return f"{rate:,.1f} {unit}" if unit == "windows/s" else f"{rate:,.0f} {unit}"
 
 
 def verdicts(rows: list[dict]) -> list[str]:
@@ -201,12 +264,21 @@ def verdicts(rows: list[dict]) -> list[str]:
         else:
             cands = [r for r in pick if r["impl"] == impl]
         if not refs or not cands:
-            lines.append(f"{sensor} camera, {config}, {impl} >= {target:g}x {ref}: not measured (numba not importable)")
+            why = "numba not importable" if not NUMBA_AVAILABLE else "not in this run"
+            lines.append(f"{sensor}, {config}, {impl} >= {target:g}x {ref}: not measured ({why})")
             continue
         ratio = cands[0]["rate"] / refs[0]["rate"]
         verdict = "met" if ratio >= target else "missed"
-        lines.append(f"{sensor} camera, {config}: {cands[0]['impl']} >= {target:g}x {ref}: {verdict} "
-                     f"({ratio:.2f}x: {cands[0]['rate']:,.0f} vs {refs[0]['rate']:,.0f} {cands[0]['unit']})")
+        what = f"{sensor} camera" if sensor != "window" else "whole window"
+        lines.append(f"{what}, {config}: {cands[0]['impl']} >= {target:g}x {ref}: {verdict} "
+                     f"({ratio:.2f}x: {_rate(cands[0]['rate'], cands[0]['unit'])} vs {_rate(refs[0]['rate'], refs[0]['unit'])})")
+    sensor, config, impl, target = WINDOW_RATE_TARGET
+    got = [r for r in rows if (r["sensor"], r["config"], r["impl"]) == (sensor, config, impl)]
+    if got:
+        verdict = "met" if got[0]["rate"] >= target else "missed"
+        lines.append(f"whole window, {config}: {impl} >= {target:g} windows/s: {verdict} ({got[0]['rate']:.1f} windows/s)")
+    else:
+        lines.append(f"whole window, {config}: {impl} >= {target:g} windows/s: not measured (not in this run)")
     return lines
 
 
@@ -220,8 +292,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     w, h = (int(v) for v in args.size.lower().split("x"))
     frames, repeats = FRAMES, args.repeats
+    window_sizes = WINDOW_SIZES
     if args.quick:
         w, h, frames, repeats = 80, 48, 16, 1
+        window_sizes = ((48, 32),)
     numba_version = "not importable"
     if NUMBA_AVAILABLE:
         import numba
@@ -232,12 +306,12 @@ def main(argv: list[str] | None = None) -> int:
           f"numpy {np.__version__}, numba {numba_version}")
     print(f"input: camera panning {PX_PER_FRAME:g} px/frame, {frames} frames at {FRAME_RATE_HZ:,.0f} frames/s, "
           f"{w}x{h}; median of {repeats} runs after one warm-up, configurations timed in turn\n")
-    rows = run(w, h, repeats, frames)
+    rows = run(w, h, repeats, frames, window_sizes)
     print(f"{'sensor':<6} {'configuration':<20} {'implementation':<26} {'thr':>3} {'rate':>18} {'x ref':>6} "
           f"{'median s':>9} {'spread s':>15} {'cpu s':>7} {'load':>5} {'output':>20}")
     for r in rows:
         ref = next(x for x in rows if x["sensor"] == r["sensor"] and x["config"] == r["config"])
-        rate = f"{r['rate']:,.0f} {r['unit']}"
+        rate = _rate(r["rate"], r["unit"])
         what = "spikes" if r["sensor"] == "spike" else "events"
         print(f"{r['sensor']:<6} {r['config']:<20} {r['impl']:<26} {r['threads']:>3} {rate:>18} "
               f"{r['rate'] / ref['rate']:>5.2f}x {r['seconds']:>9.4f} {r['min']:>7.4f}-{r['max']:<7.4f} "

@@ -22,6 +22,7 @@ cropped. A photograph that already has the view's size is used as stored.
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from types import MappingProxyType
@@ -174,6 +175,14 @@ def read_image_file(path: str | os.PathLike) -> np.ndarray:
     return luma(decoded, channel_order="bgr", source=str(p))
 
 
+@functools.lru_cache(maxsize=len(_LOADERS))
+def _bundled_luma(name: str) -> np.ndarray:
+    """A bundled photograph's luma, decoded once per process (every simulated window reads one)."""
+    image = luma(_LOADERS[name](), channel_order="rgb", source=name)
+    image.flags.writeable = False
+    return image
+
+
 def read_photo(name_or_path: str | os.PathLike) -> np.ndarray:
     """A bundled photograph (by name) or an image file (by path), as luma at its stored size.
 
@@ -189,7 +198,7 @@ def read_photo(name_or_path: str | os.PathLike) -> np.ndarray:
         For decoded content that is not a valid image.
     """
     if isinstance(name_or_path, str) and name_or_path in _LOADERS:
-        return luma(_LOADERS[name_or_path](), channel_order="rgb", source=name_or_path)
+        return _bundled_luma(name_or_path).copy()
     try:
         return read_image_file(name_or_path)
     except SourceError as exc:
