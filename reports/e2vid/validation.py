@@ -1,0 +1,67 @@
+"""The event networks on the held-out validation sequences of the training data (run from the repository root).
+
+python reports/e2vid/validation.py [--weights ../shared/weights] [--items 16]
+
+Every method that reads normalised 5-bin voxel grids in 0.35 events/pixel windows (``e2vid``,
+``firenet-sim`` and, given its weights folder, the published ``firenet``) runs through the same
+validation sequences the trainer scores (training photographs and procedural motion only; no test
+photograph), with the trainer's own score: mean SSIM over the steps after the 2-window warm-up.
+The shard is the trainer's (``runs/shards``), simulated first when it is missing. Writes
+``validation.csv`` here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import pandas as pd
+import torch
+
+here = Path(__file__).resolve().parent
+sys.path.insert(0, str(here.parents[1]))
+
+from neuspike.methods import create  # noqa: E402
+from neuspike.train.sequences import (  # noqa: E402
+    PRESETS,
+    DataSpec,
+    TrainSpec,
+    build_shard,
+    load_shard,
+    training_method,
+    validate,
+)
+
+METHODS = ("e2vid", "firenet-sim", "firenet")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--weights", default=None, help="folder of published weights (for firenet)")
+    p.add_argument("--items", type=int, default=16, help="validation sequences (the first N of the shard)")
+    p.add_argument("--shards", type=Path, default=Path("runs/shards"))
+    args = p.parse_args(argv)
+    torch.set_num_threads(1)
+    spec = TrainSpec(method="e2vid", data=DataSpec(), **{**PRESETS["e2vid"], "length": 8, "val_items": args.items})
+    paths = build_shard(training_method("e2vid"), spec.data, seed=spec.seed, split="val", count=args.items,
+                        folder=args.shards / spec.data.key(), progress=False)
+    shard = load_shard(paths)
+    rows = []
+    for name in METHODS:
+        if name == "firenet" and args.weights is None:
+            print("firenet: skipped (no --weights folder)", file=sys.stderr)
+            continue
+        method = create(name, weights_dir=args.weights)
+        module = method.module.float()
+        scores = validate(module, shard, spec)
+        rows.append({"method": name, "sequences": len(paths), **scores,
+                     "weights": str(method.weights_path.name)})
+        print(f"{name}: val SSIM {scores['val_ssim']:.4f} (last step {scores['val_ssim_last']:.4f}), "
+              f"L1 {scores['val_l1']:.4f}", file=sys.stderr)
+    pd.DataFrame(rows).to_csv(here / "validation.csv", index=False, float_format="%.4f")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
