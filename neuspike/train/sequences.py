@@ -80,10 +80,16 @@ KINDS = ("pan", "zoom", "fan")
 class DataSpec:
     """What the simulated sequences are (part of the shard's identity).
 
-    ``size`` is the simulated view (width = height, pixels); ``windows`` the windows per item;
+    ``size`` is the simulated item (width = height, pixels); ``windows`` the windows per item;
     ``events_per_pixel`` the fixed window count per pixel (the methods' 0.35); ``threshold_range``
     the event contrast thresholds (log units, drawn log-uniformly); ``displacement_px`` the scene
     displacement aimed at for the history (doubled until the windows fit, at most 4 times).
+
+    ``view`` (width, height) or None: the scene view the photograph is fitted to. With a view, each
+    item is a ``size`` x ``size`` crop of it at a random position (the scene renders only the
+    crop), so the photographs are seen at the scale of an evaluation at that view size (the
+    sweeps' 400x250); without one the whole photograph is fitted to ``size`` x ``size``, about
+    three times smaller than in the sweeps. Left out of the shard key when unset.
     """
 
     size: int = 128
@@ -94,6 +100,7 @@ class DataSpec:
     kinds: tuple[str, ...] = KINDS
     photos: tuple[str, ...] = TRAIN_PHOTOS
     displacement_px: float = 8.0
+    view: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         bad = sorted(set(self.photos) & set(TEST_PHOTOS))
@@ -106,12 +113,23 @@ class DataSpec:
             raise InputError(f"kinds: expected a non-empty subset of {KINDS}, got {self.kinds}")
         if self.size < 16 or self.windows < 2:
             raise InputError(f"size >= 16 and windows >= 2 expected, got {self.size}, {self.windows}")
+        if self.view is not None:
+            try:
+                vw, vh = (int(v) for v in self.view)
+            except (TypeError, ValueError):
+                raise InputError(f"view: expected (width, height), got {self.view!r}") from None
+            if vw < self.size or vh < self.size:
+                raise InputError(f"view: {vw}x{vh} is smaller than the {self.size}x{self.size} items cut from it")
+            object.__setattr__(self, "view", (vw, vh))
         lo, hi = self.threshold_range
         if not 0 < lo <= hi:
             raise InputError(f"threshold_range: expected 0 < low <= high, got {self.threshold_range}")
 
     def key(self) -> str:
-        text = json.dumps(dataclasses.asdict(self), sort_keys=True)
+        d = dataclasses.asdict(self)
+        if d["view"] is None:  # absent rather than null: shards made before the field keep their key
+            del d["view"]
+        text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
@@ -168,6 +186,8 @@ class TrainSpec:
         data = dict(d.pop("data"))
         for k in ("threshold_range", "noise_levels", "kinds", "photos"):
             data[k] = tuple(data[k])
+        if data.get("view") is not None:
+            data["view"] = tuple(data["view"])
         return cls(data=DataSpec(**data), **d)
 
 
@@ -188,16 +208,19 @@ def draw_cell(data: DataSpec, rng: np.random.Generator) -> Cell:
     """A random cell of ``data`` (every draw from ``rng``)."""
     kind = str(rng.choice(data.kinds))
     photo = str(rng.choice(data.photos))
-    size = (data.size, data.size)
+    size = (data.size, data.size) if data.view is None else data.view
     dynamic_range = None if rng.random() < 0.5 else float(np.exp(rng.uniform(np.log(10), np.log(1000))))
-    common = dict(image=photo, size=size, dynamic_range=dynamic_range)
+    common: dict[str, Any] = dict(image=photo, size=size, dynamic_range=dynamic_range)
+    if data.view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
+        x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in data.view)
+        common["crop"] = (x0, y0, data.size, data.size)
     if kind == "pan":
         angle = rng.uniform(0, 2 * np.pi)
         speed = float(np.exp(rng.uniform(np.log(1000), np.log(6000))))
         scene = SceneSpec("pan", velocity_px_s=(speed * np.cos(angle), speed * np.sin(angle)), **common)
     elif kind == "zoom":
         rate = float(rng.uniform(4.0, 20.0) * rng.choice([-1.0, 1.0]))
-        focus = tuple(float(v) for v in rng.uniform(0.25, 0.75, 2) * (data.size - 1))
+        focus = tuple(float(v) for v in rng.uniform(0.25, 0.75, 2) * (np.asarray(size) - 1))
         scene = SceneSpec("zoom", zoom_rate_hz=rate, focus=focus, **common)
     else:
         scene = SceneSpec("fan", rpm=float(rng.uniform(500, 2600) * rng.choice([-1.0, 1.0])),
@@ -228,19 +251,24 @@ def backward_flow(scene: SceneSpec, t0_s: float, t1_s: float) -> np.ndarray:
     Returns float32 (2, H, W): ``(dx, dy)`` such that view pixel ``(x, y)`` at ``t1_s`` shows what
     ``(x + dx, y + dy)`` showed at ``t0_s``. Pan: ``-v (t1 - t0)``; zoom: the view maps to the plane
     as ``f + (p - f) exp(-r t)``, so ``p' = f + (p - f) exp(-r (t1 - t0))``; fan and still: zero (the
-    background is static; moving blades are left to the occlusion mask).
+    background is static; moving blades are left to the occlusion mask). For a scene with a
+    ``crop`` the flow covers the crop (pixel ``(x, y)`` of it is ``(x0 + x, y0 + y)`` of the view).
     """
     w, h = scene.size
+    x0 = y0 = 0
+    if scene.crop is not None:
+        x0, y0, w, h = scene.crop
     flow = np.zeros((2, h, w), dtype=np.float32)
     dt = t1_s - t0_s
     if scene.kind == "pan":
         flow[0] = -scene.velocity_px_s[0] * dt
         flow[1] = -scene.velocity_px_s[1] * dt
     elif scene.kind == "zoom":
-        fx, fy = scene.focus if scene.focus is not None else ((w - 1) / 2.0, (h - 1) / 2.0)
         shrink = math.exp(-scene.zoom_rate_hz * dt) - 1.0
-        flow[0] = ((np.arange(w, dtype=np.float64) - fx) * shrink)[None, :]
-        flow[1] = ((np.arange(h, dtype=np.float64) - fy) * shrink)[:, None]
+        vw, vh = scene.size
+        fx, fy = scene.focus if scene.focus is not None else ((vw - 1) / 2.0, (vh - 1) / 2.0)
+        flow[0] = ((x0 + np.arange(w, dtype=np.float64) - fx) * shrink)[None, :]
+        flow[1] = ((y0 + np.arange(h, dtype=np.float64) - fy) * shrink)[:, None]
     elif scene.kind not in ("fan", "still"):
         raise InputError(f"backward_flow: no exact flow for scene kind {scene.kind!r}")
     return flow
@@ -573,7 +601,8 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
         atomic.write_text(log_path, ",".join(fields) + "\n")
     params = sum(p.numel() for p in module.parameters())
     print(f"{spec.method}: {params:,} parameters; {len(train_paths)} training and {len(val_paths)} validation "
-          f"sequences of {spec.data.windows} windows at {spec.data.size}x{spec.data.size}; crop {spec.crop}, "
+          f"sequences of {spec.data.windows} windows at {spec.data.size}x{spec.data.size}"
+          f"{'' if spec.data.view is None else ' cut from %dx%d views' % spec.data.view}; crop {spec.crop}, "
           f"batch {spec.batch}, {torch.get_num_threads()} thread(s), {spec.precision}; resuming at step {step}",
           file=sys.stderr)
 
@@ -700,7 +729,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--train-items", type=int, default=None, help="simulated training sequences")
     p.add_argument("--val-items", type=int, default=None, help="simulated validation sequences")
     p.add_argument("--windows", type=int, default=None, help="event windows per sequence")
-    p.add_argument("--size", type=int, default=None, help="simulated view size (pixels, square)")
+    p.add_argument("--size", type=int, default=None, help="simulated item size (pixels, square)")
+    p.add_argument("--view", default=None, metavar="WxH",
+                   help="fit the photographs to a WxH view and cut each item from it at a random position "
+                        "(e.g. 400x250, the sweeps' scale); default: the photograph fitted to the item itself")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=None, help="torch threads (1 when another job shares the CPU)")
     p.add_argument("--precision", choices=("auto", "bfloat16", "float32"), default=None,
@@ -731,6 +763,10 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         data_kw["windows"] = args.windows
     if args.size is not None:
         data_kw["size"] = args.size
+    if args.view is not None:
+        from neuspike.checks import parse_size
+
+        data_kw["view"] = parse_size(args.view)
     if args.precision is not None:
         kw["precision"] = args.precision
     if args.init_from is not None:

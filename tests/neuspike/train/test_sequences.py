@@ -20,6 +20,7 @@ from neuspike.train.sequences import (
     TrainSpec,
     backward_flow,
     build_shard,
+    draw_cell,
     learning_rate,
     load_shard,
     make_batch,
@@ -53,6 +54,8 @@ def test_backward_flow_of_a_pan_is_exact_for_whole_pixel_steps():
 @pytest.mark.parametrize("spec", [
     SceneSpec("pan", image="astronaut", size=(64, 48), velocity_px_s=(3100.0, -1200.0)),
     SceneSpec("zoom", image="astronaut", size=(64, 48), zoom_rate_hz=-60.0, focus=(20.0, 30.0)),
+    SceneSpec("zoom", image="astronaut", size=(160, 100), zoom_rate_hz=-30.0, focus=(40.0, 70.0),
+              crop=(70, 20, 48, 48)),  # a crop away from the focus: the flow is the view's there
 ])
 def test_backward_flow_maps_the_later_frame_onto_the_earlier(spec):
     """warp(render(t0), flow) equals render(t1) up to bilinear resampling error, far below the frames' change."""
@@ -241,3 +244,33 @@ def test_a_spec_frozen_before_lr_min_reads_as_a_constant_rate():
     old = spec.as_dict()
     del old["lr_min"]
     assert TrainSpec.from_dict(old) == spec and spec.lr_min is None
+
+
+def test_backward_flow_of_a_crop_is_the_crop_of_the_views_flow():
+    full = SceneSpec("zoom", image="astronaut", size=(160, 100), zoom_rate_hz=25.0, focus=(40.0, 70.0))
+    cropped = dataclasses.replace(full, crop=(70, 20, 48, 32))
+    np.testing.assert_array_equal(backward_flow(cropped, -0.001, 0.0005),
+                                  backward_flow(full, -0.001, 0.0005)[:, 20:52, 70:118])
+
+
+def test_a_view_spec_cuts_items_from_the_larger_view_and_leaves_old_shard_keys_alone():
+    """Without ``view`` the key and every draw are those of a spec made before the field existed;
+    with it, cells are crops of the view at drawn positions, and the item's targets are those crops."""
+    plain = DataSpec()
+    assert plain.key() == "f40df6737f28"  # the shard key the first e2vid stages trained on
+    rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
+    view = DataSpec(size=40, windows=3, view=(160, 100), kinds=("pan",), noise_levels=("none",))
+    assert view.key() != dataclasses.replace(view, view=None).key()
+    cell = draw_cell(view, rng_a)
+    assert cell.scene.size == (160, 100) and cell.scene.crop[2:] == (40, 40)
+    x0, y0 = cell.scene.crop[:2]
+    assert 0 <= x0 <= 120 and 0 <= y0 <= 60
+    assert draw_cell(dataclasses.replace(view, view=None), rng_b).scene.crop is None
+    item = simulate_item(training_method("firenet-sim"), cell, view)
+    assert item is not None and item.voxels.shape[-2:] == (40, 40)
+    times = np.array([0.0])  # the key instant: the last target is the crop of the full view's frame
+    whole = make_scene(dataclasses.replace(cell.scene, crop=None)).render(times)[0]
+    np.testing.assert_allclose(item.targets[-1].astype(np.float32),
+                               np.clip(whole[y0:y0 + 40, x0:x0 + 40], 0, 1), atol=1e-3)
+    with pytest.raises(InputError, match="view"):
+        DataSpec(size=128, view=(400, 100))
