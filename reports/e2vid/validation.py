@@ -1,13 +1,14 @@
 """The event networks on the held-out validation sequences of the training data (run from the repository root).
 
-python reports/e2vid/validation.py [--weights ../shared/weights] [--items 16]
+python reports/e2vid/validation.py [--weights ../shared/weights] [--items 16] [--view 400x250]
 
 Every method that reads normalised 5-bin voxel grids in 0.35 events/pixel windows (``e2vid``,
 ``firenet-sim`` and, given its weights folder, the published ``firenet``) runs through the same
 validation sequences the trainer scores (training photographs and procedural motion only; no test
 photograph), with the trainer's own score: mean SSIM over the steps after the 2-window warm-up.
-The shard is the trainer's (``runs/shards``), simulated first when it is missing. Writes
-``validation.csv`` here.
+The shard is the trainer's (``runs/shards``), simulated first when it is missing: the photographs
+fitted to the 128x128 items, or with ``--view`` items cut from larger views (the sweeps' scale).
+Writes ``validation.csv`` here (``validation_view.csv`` with ``--view``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import torch
 here = Path(__file__).resolve().parent
 sys.path.insert(0, str(here.parents[1]))
 
+from neuspike.checks import parse_size  # noqa: E402
 from neuspike.methods import create  # noqa: E402
 from neuspike.train.sequences import (  # noqa: E402
     PRESETS,
@@ -41,9 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--weights", default=None, help="folder of published weights (for firenet)")
     p.add_argument("--items", type=int, default=16, help="validation sequences (the first N of the shard)")
     p.add_argument("--shards", type=Path, default=Path("runs/shards"))
+    p.add_argument("--view", default=None, metavar="WxH", help="items cut from views of this size")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
-    spec = TrainSpec(method="e2vid", data=DataSpec(), **{**PRESETS["e2vid"], "length": 8, "val_items": args.items})
+    view = None if args.view is None else parse_size(args.view)
+    spec = TrainSpec(method="e2vid", data=DataSpec(view=view),
+                     **{**PRESETS["e2vid"], "length": 8, "val_items": args.items})
     paths = build_shard(training_method("e2vid"), spec.data, seed=spec.seed, split="val", count=args.items,
                         folder=args.shards / spec.data.key(), progress=False)
     shard = load_shard(paths)
@@ -55,11 +60,12 @@ def main(argv: list[str] | None = None) -> int:
         method = create(name, weights_dir=args.weights)
         module = method.module.float()
         scores = validate(module, shard, spec)
-        rows.append({"method": name, "sequences": len(paths), **scores,
+        rows.append({"method": name, "sequences": len(paths), "view": args.view or "128x128", **scores,
                      "weights": str(method.weights_path.name)})
         print(f"{name}: val SSIM {scores['val_ssim']:.4f} (last step {scores['val_ssim_last']:.4f}), "
               f"L1 {scores['val_l1']:.4f}", file=sys.stderr)
-    pd.DataFrame(rows).to_csv(here / "validation.csv", index=False, float_format="%.4f")
+    name = "validation.csv" if view is None else "validation_view.csv"
+    pd.DataFrame(rows).to_csv(here / name, index=False, float_format="%.4f")
     return 0
 
 
