@@ -5,7 +5,11 @@ python reports/e2vid/make_figures.py
 Validation SSIM (8 held-out sequences of training photographs, steps after the warm-up) against the
 step: ``firenet-sim``, ``e2vid`` stage 1 and stage 2 (stage 2 starts from stage 1's best weights, at
 step 1,000, with 8-window sequences and a lower learning rate), and the published FireNet's score on
-the same sequences for orientation. Writes training_curves.png.
+the same sequences for orientation. Stage 3 (from stage 2's best, at step 1,900: items cut from
+400x250 views, cosine learning rate) is scored on its own 16 validation sequences, cut the same way,
+so its curve is drawn on a second axis with the scores of the published FireNet and ``firenet-sim``
+on those sequences (``validation_view.csv``, ``python reports/e2vid/validation.py --view 400x250``).
+Writes training_curves.png.
 """
 
 from pathlib import Path
@@ -19,6 +23,7 @@ import pandas as pd  # noqa: E402
 here = Path(__file__).resolve().parent
 PUBLISHED_FIRENET_VAL_SSIM = 0.347  # the published weights on the same 8 validation sequences
 STAGE2_START = 1000  # the stage-1 step whose weights stage 2 starts from
+STAGE3_START = 1900  # stage 2's best step (900) after stage 1's 1,000
 
 
 def val(name: str, offset: int = 0) -> pd.DataFrame:
@@ -27,7 +32,7 @@ def val(name: str, offset: int = 0) -> pd.DataFrame:
     return log.assign(step=log.step + offset)
 
 
-fig, ax = plt.subplots(figsize=(7, 3.8))
+fig, (ax, ax3) = plt.subplots(1, 2, figsize=(11, 3.8))
 fs = val("firenet-sim_train_log.csv")
 ax.plot(fs.step, fs.val_ssim, "-", label="firenet-sim")
 s1 = val("e2vid_train_log.csv")
@@ -38,7 +43,24 @@ ax.axhline(PUBLISHED_FIRENET_VAL_SSIM, color="grey", ls=":", label="published fi
 ax.set_xlabel("optimiser step")
 ax.set_ylabel("validation SSIM")
 ax.legend(fontsize=8)
+ax.set_title("8 validation sequences, photographs fitted to 128x128", fontsize=9)
+s3 = None
+if (here / "e2vid_stage3_train_log.csv").is_file():
+    s3 = val("e2vid_stage3_train_log.csv", STAGE3_START)
+    start = pd.read_csv(here / "validation_view.csv").set_index("method")
+    first = pd.DataFrame({"step": [STAGE3_START], "val_ssim": [start.loc["e2vid", "val_ssim"]]})
+    s3 = pd.concat([first, s3[["step", "val_ssim"]]])
+    ax3.plot(s3.step, s3.val_ssim, "-o", ms=3, color="C1", label="e2vid, stage 3 (400x250 views, cosine lr; not shipped)")
+    for name, style, what in (("firenet-sim", "--", "shipped"), ("firenet", ":", "published")):
+        ax3.axhline(start.loc[name, "val_ssim"], color="grey", ls=style, label=f"{name} ({what})")
+    ax3.set_xlabel("optimiser step")
+    ax3.set_ylabel("validation SSIM")
+    ax3.set_title("16 validation sequences cut from 400x250 views", fontsize=9)
+    ax3.legend(fontsize=8)
+else:
+    ax3.set_visible(False)
 fig.tight_layout()
 fig.savefig(here / "training_curves.png", dpi=120)
 print(f"best: firenet-sim {fs.val_ssim.max():.3f}, e2vid stage 1 {s1.val_ssim.max():.3f}, "
-      f"stage 2 {s2.val_ssim.max():.3f} (step {int(s2.loc[s2.val_ssim.idxmax(), 'step'])})")
+      f"stage 2 {s2.val_ssim.max():.3f} (step {int(s2.loc[s2.val_ssim.idxmax(), 'step'])})"
+      + ("" if s3 is None else f"; stage 3 on its own sequences {s3.val_ssim.max():.3f}"))
