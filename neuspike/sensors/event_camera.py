@@ -575,17 +575,17 @@ class _Capture:
                 log_max = self.log_of(frames[k], logs[0])
             n_active, n_events, c_max = self.pixel_pass(frames[k], dt, sig, mem, spare, log_max)
             q_one = self.fraction_unit(t_prev, dt)
-            noise_keys, noisy = None, no_noise
+            from_noise, noisy = None, no_noise
             if self.shot_noise:
                 self.switch("shot_noise")
                 drawn = self.draw_shot_noise(frames[k], dt)
                 if drawn is not None:
                     pix_n, f_n, on_n = drawn
                     order = np.argsort(pix_n + f_n)  # pixel, then time (f_n < 1), as noise_pixels
-                    noise_keys, noisy = event_kernels.noise_keys(
+                    from_noise, noisy = event_kernels.noise_keys(
                         pix_n[order], f_n[order], on_n[order], sig, mem, self.d1, self.leak, dt, cam._th_on,
                         cam._th_off, q_one, cam._pix_bits, last_emit, period, t_prev, dt / q_one)
-                    n_events += noise_keys.shape[0]
+                    n_events += from_noise.shape[0]
                 self.switch("dvs_pixel")
             if n_events:
                 slot = jobs & 1
@@ -599,9 +599,9 @@ class _Capture:
                     self.active, n_active, c_max, self.d1, sig, mem, self.leak, np.float32(dt), cam._symmetric,
                     cam._th_on, cam._th_off, q_one, cam._pix_bits, keys, noisy, last_emit, period, t_prev,
                     dt / q_one, last_emit is not None and dt < period)
-                if noise_keys is not None:
-                    keys[count:count + noise_keys.shape[0]] = noise_keys
-                    count += noise_keys.shape[0]
+                if from_noise is not None:
+                    keys[count:count + from_noise.shape[0]] = from_noise
+                    count += from_noise.shape[0]
                 keys = keys[:count]
                 n_events = count
             if n_events:
