@@ -14,9 +14,11 @@ the occlusion mask (flow zero).
 
 Data (:func:`draw_cell`): the training photographs only (``TRAIN_PHOTOS``; the test photographs are
 refused), pan / zoom / fan scenes with random direction, speed, zoom rate, focus, rpm and blades,
+and on request procedural ``dead_leaves`` scenes (occluding layers, endless variety),
 linear or high-dynamic-range radiance, motion scale S in {16, ..., 256}, light L in {1/2, ..., 1/32},
 event contrast threshold log-uniform in ``threshold_range``, and noise level none..high drawn
-uniformly (the event shot noise of the paper's levels). Items are simulated once into a *shard*
+uniformly over ``noise_levels`` (the event shot noise of the paper's levels; a level listed twice is
+drawn twice as often). Items are simulated once into a *shard*
 (``runs/shards/<hash>/``, one ``.npz`` per item, written atomically, resumable) shared by every
 network with the same data spec; training takes random crops and flips of them.
 
@@ -71,6 +73,9 @@ __all__ = [
 MOTIONS = (16, 32, 64, 128, 256)
 LIGHTS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32)
 KINDS = ("pan", "zoom", "fan")
+#: Every kind a sequence item can be drawn from (``dead_leaves``: procedural occluding layers, see
+#: :mod:`neuspike.scenes.dead_leaves`); the default data keep :data:`KINDS`.
+ALL_KINDS = KINDS + ("dead_leaves",)
 
 
 # --- specifications ---------------------------------------------------------------------------
@@ -102,6 +107,9 @@ class DataSpec:
     displacement_px: float = 8.0
     view: tuple[int, int] | None = None
 
+    # ``kinds`` and ``noise_levels`` are drawn uniformly over the tuple, so a repeated entry is drawn
+    # more often (``("none", "none", "small", "medium", "high")``: clean events two times in five).
+
     def __post_init__(self) -> None:
         bad = sorted(set(self.photos) & set(TEST_PHOTOS))
         if bad:
@@ -109,8 +117,12 @@ class DataSpec:
         unknown = sorted(set(self.noise_levels) - set(NOISE_LEVELS))
         if unknown:
             raise InputError(f"noise_levels: unknown {unknown}; choose from {sorted(NOISE_LEVELS)}")
-        if not set(self.kinds) <= set(KINDS) or not self.kinds:
-            raise InputError(f"kinds: expected a non-empty subset of {KINDS}, got {self.kinds}")
+        if not set(self.kinds) <= set(ALL_KINDS) or not self.kinds:
+            raise InputError(f"kinds: expected a non-empty subset of {ALL_KINDS}, got {self.kinds}")
+        if not self.noise_levels:
+            raise InputError("noise_levels: expected at least one level")
+        if self.view is not None and "dead_leaves" in self.kinds:
+            raise InputError("view: dead_leaves scenes do not render a crop of a larger view; drop one of the two")
         if self.size < 16 or self.windows < 2:
             raise InputError(f"size >= 16 and windows >= 2 expected, got {self.size}, {self.windows}")
         if self.view is not None:
@@ -214,10 +226,15 @@ def draw_cell(data: DataSpec, rng: np.random.Generator) -> Cell:
     if data.view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
         x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in data.view)
         common["crop"] = (x0, y0, data.size, data.size)
-    if kind == "pan":
+    if kind in ("pan", "dead_leaves"):
         angle = rng.uniform(0, 2 * np.pi)
         speed = float(np.exp(rng.uniform(np.log(1000), np.log(6000))))
-        scene = SceneSpec("pan", velocity_px_s=(speed * np.cos(angle), speed * np.sin(angle)), **common)
+        velocity = (speed * np.cos(angle), speed * np.sin(angle))
+        if kind == "pan":
+            scene = SceneSpec("pan", velocity_px_s=velocity, **common)
+        else:  # procedural: no photograph; the layers' own draws come from the scene seed
+            scene = SceneSpec("dead_leaves", size=size, dynamic_range=dynamic_range, velocity_px_s=velocity,
+                              seed=int(rng.integers(0, 2**31 - 1)))
     elif kind == "zoom":
         rate = float(rng.uniform(4.0, 20.0) * rng.choice([-1.0, 1.0]))
         focus = tuple(float(v) for v in rng.uniform(0.25, 0.75, 2) * (np.asarray(size) - 1))
@@ -249,7 +266,8 @@ def backward_flow(scene: SceneSpec, t0_s: float, t1_s: float) -> np.ndarray:
     """Exact backward flow of an analytic scene from scene time ``t1_s`` to ``t0_s``.
 
     Returns float32 (2, H, W): ``(dx, dy)`` such that view pixel ``(x, y)`` at ``t1_s`` shows what
-    ``(x + dx, y + dy)`` showed at ``t0_s``. Pan: ``-v (t1 - t0)``; zoom: the view maps to the plane
+    ``(x + dx, y + dy)`` showed at ``t0_s``. Pan, and the background layer of ``dead_leaves`` (its
+    foreground shapes move otherwise and are left to the loss's occlusion mask): ``-v (t1 - t0)``; zoom: the view maps to the plane
     as ``f + (p - f) exp(-r t)``, so ``p' = f + (p - f) exp(-r (t1 - t0))``; fan and still: zero (the
     background is static; moving blades are left to the occlusion mask). For a scene with a
     ``crop`` the flow covers the crop (pixel ``(x, y)`` of it is ``(x0 + x, y0 + y)`` of the view).
@@ -260,7 +278,7 @@ def backward_flow(scene: SceneSpec, t0_s: float, t1_s: float) -> np.ndarray:
         x0, y0, w, h = scene.crop
     flow = np.zeros((2, h, w), dtype=np.float32)
     dt = t1_s - t0_s
-    if scene.kind == "pan":
+    if scene.kind in ("pan", "dead_leaves"):
         flow[0] = -scene.velocity_px_s[0] * dt
         flow[1] = -scene.velocity_px_s[1] * dt
     elif scene.kind == "zoom":
@@ -288,7 +306,7 @@ def _history_s(cell: Cell, displacement_px: float) -> float:
     """Sensor seconds of event history in which the scene moves about ``displacement_px`` pixels."""
     s = cell.scene
     w, h = s.size
-    if s.kind == "pan":
+    if s.kind in ("pan", "dead_leaves"):
         speed = math.hypot(*s.velocity_px_s)
     elif s.kind == "zoom":
         speed = abs(s.zoom_rate_hz) * 0.35 * min(w, h)
@@ -328,7 +346,7 @@ def simulate_item(method: Any, cell: Cell, data: DataSpec) -> SequenceItem | Non
     targets = np.clip(scene.render(times), 0.0, 1.0).astype(np.float16)
     flow = np.stack([np.zeros((2, data.size, data.size), np.float32)]
                     + [backward_flow(cell.scene, times[i - 1], times[i]) for i in range(1, k)]).astype(np.float16)
-    meta = {"scene": cell.scene.kind, "photo": cell.scene.image, "noise": cell.condition.noise,
+    meta = {"scene": cell.scene.kind, "photo": cell.scene.image if cell.scene.kind != "dead_leaves" else None, "noise": cell.condition.noise,
             "motion": cell.condition.motion, "light": cell.condition.light,
             "threshold": cell.sensor.event_threshold, "seed": cell.seed, "events": int(len(sample.events))}
     return SequenceItem(voxels, targets, flow, meta)
@@ -542,12 +560,18 @@ def _save_checkpoint(path: Path, module: torch.nn.Module, opt: torch.optim.Optim
 
 def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path | None,
           max_minutes: float | None = None, threads: int | None = None, progress: bool = True,
-          simulate_only: bool = False) -> dict[str, Any]:
+          simulate_only: bool = False, snapshot_every: int | None = None) -> dict[str, Any]:
     """Run (or resume) ``spec`` in ``run_dir``; returns the final state (step, best validation, wall time).
 
     The spec is frozen as ``run_dir/spec.json``; a different spec in an existing run folder is an
     error. ``max_minutes`` stops the run early (after a checkpoint) so a later call resumes it.
+    ``snapshot_every``: also keep the weights of every N-th step as
+    ``run_dir/snapshots/step-NNNNN/<method>.safetensors`` (with its card), for choosing between them
+    afterwards by another measure than the sequence validation (the sweep harness on training
+    photographs, ``reports/e2vid/candidates``).
     """
+    if snapshot_every is not None and snapshot_every < 1:
+        raise InputError(f"snapshot_every: expected a positive step count, got {snapshot_every}")
     if threads is not None:
         torch.set_num_threads(threads)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -644,6 +668,9 @@ def train(spec: TrainSpec, *, run_dir: Path, shard_root: Path, export_dir: Path 
                         export(module, spec, best, step=step, wall_s=wall_s, folder=export_dir)
             writer.writerow(row)
             log.flush()
+            if snapshot_every is not None and step % snapshot_every == 0:
+                export(module, spec, {"step": step, **{k: row[k] for k in ("val_l1", "val_ssim", "val_ssim_last") if k in row}},
+                       step=step, wall_s=wall_s, folder=run_dir / "snapshots" / f"step-{step:05d}")
             if step % spec.checkpoint_every == 0 or "val_ssim" in row or step == spec.steps:
                 _save_checkpoint(ckpt_path, module, opt, step, best, wall_s)
             if bar is not None:
@@ -743,6 +770,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start from these weights (a later stage, or a run continued where its checkpoint is "
                         "gone: copy the shipped neuspike/trained/<method>.safetensors elsewhere first, since "
                         "exports overwrite it); a checkpoint in --run-dir still wins")
+    p.add_argument("--kinds", default=None, metavar="K1,K2,...",
+                   help=f"scene kinds drawn for the items, from {','.join(ALL_KINDS)} (default {','.join(KINDS)}); "
+                        "a kind listed twice is drawn twice as often")
+    p.add_argument("--noise-levels", default=None, metavar="N1,N2,...",
+                   help="event noise levels drawn for the items (default none,small,medium,high); a level listed "
+                        "twice is drawn twice as often")
+    p.add_argument("--snapshot-every", type=int, default=None, metavar="N",
+                   help="also keep every N-th step's weights under RUN_DIR/snapshots/ (to choose between them later)")
     p.add_argument("--simulate-only", action="store_true", help="build the sequence shard and stop")
     p.add_argument("--quick", action="store_true", help="a tiny run that finishes in a minute (smoke test)")
     return p
@@ -767,6 +802,10 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         from neuspike.checks import parse_size
 
         data_kw["view"] = parse_size(args.view)
+    for name, field_name in (("kinds", "kinds"), ("noise_levels", "noise_levels")):
+        text = getattr(args, name)
+        if text is not None:
+            data_kw[field_name] = tuple(v.strip() for v in text.split(",") if v.strip())
     if args.precision is not None:
         kw["precision"] = args.precision
     if args.init_from is not None:
@@ -782,7 +821,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     run_dir = args.run_dir or Path("runs") / (spec.method + ("-quick" if args.quick else ""))
     export_dir = None if args.no_export else (args.export_dir or PACKAGE_WEIGHTS)
     result = train(spec, run_dir=run_dir, shard_root=args.shards, export_dir=export_dir,
-                   max_minutes=args.max_minutes, threads=args.threads, simulate_only=args.simulate_only)
+                   max_minutes=args.max_minutes, threads=args.threads, simulate_only=args.simulate_only,
+                   snapshot_every=args.snapshot_every)
     print(json.dumps(result, indent=2))
     return 0
 

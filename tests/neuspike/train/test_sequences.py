@@ -274,3 +274,72 @@ def test_a_view_spec_cuts_items_from_the_larger_view_and_leaves_old_shard_keys_a
                                np.clip(whole[y0:y0 + 40, x0:x0 + 40], 0, 1), atol=1e-3)
     with pytest.raises(InputError, match="view"):
         DataSpec(size=128, view=(400, 100))
+
+
+def test_dead_leaves_items_flow_with_the_background_and_the_mask_takes_the_foreground():
+    """A dead-leaves cell: its flow is the background layer's translation, so warping the background
+    layer alone reproduces its later frame (the foreground shapes are left to the loss's occlusion
+    mask); the item simulates; a view with dead leaves and an unknown kind are refused."""
+    from neuspike.scenes.dead_leaves import DeadLeavesScene
+
+    data = DataSpec(size=48, windows=3, kinds=("dead_leaves",), noise_levels=("none",))
+    cell = draw_cell(data, np.random.default_rng(7))
+    assert cell.scene.kind == "dead_leaves"
+    t0, t1 = -0.0012, 0.0003
+    flow = backward_flow(cell.scene, t0, t1)
+    np.testing.assert_allclose(flow[:, 10, 10], -np.asarray(cell.scene.velocity_px_s) * (t1 - t0), rtol=1e-5)
+    scene = DeadLeavesScene(cell.scene)
+    import copy
+
+    background = copy.copy(scene)  # the same layers; keep only the opaque background
+    background._layers = scene._layers[:1]
+    b0, b1 = background._render(np.array([t0, t1]))
+    warped, _ = warp(torch.from_numpy(b0)[None, None], torch.from_numpy(flow)[None])
+    err = np.abs(_interior(warped[0, 0].numpy() - b1, 8)).mean()
+    assert err < 0.25 * np.abs(_interior(b0 - b1, 8)).mean()
+    item = simulate_item(training_method("firenet-sim"), cell, data)
+    assert item is not None and item.meta["scene"] == "dead_leaves" and item.meta["photo"] is None
+    with pytest.raises(InputError, match="dead_leaves"):
+        DataSpec(size=48, kinds=("pan", "dead_leaves"), view=(160, 100))
+    with pytest.raises(InputError, match="kinds"):
+        DataSpec(kinds=("pan", "video"))
+
+
+def test_listed_twice_is_drawn_twice_as_often_and_the_default_draws_are_unchanged():
+    """Kinds and noise levels are drawn uniformly over their tuples (a repeat weights a level); the
+    default spec, which lists neither twice nor dead_leaves, keeps its key and its draws."""
+    assert DataSpec().kinds == ("pan", "zoom", "fan") and DataSpec().key() == "f40df6737f28"
+    weighted = DataSpec(size=32, noise_levels=("none", "none", "high"), kinds=("pan",))
+    rng = np.random.default_rng(11)
+    noise = [draw_cell(weighted, rng).condition.noise for _ in range(1500)]
+    share = noise.count("none") / len(noise)
+    assert abs(share - 2 / 3) < 4 * np.sqrt(2 / 9 / len(noise)), share  # four binomial standard deviations
+    with pytest.raises(InputError, match="noise_levels"):
+        DataSpec(noise_levels=())
+
+
+def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
+    """--kinds / --noise-levels reach the data spec; --snapshot-every keeps every N-th step's weights with a card."""
+    import json
+
+    from neuspike.train.sequences import build_parser, spec_from_args
+
+    args = build_parser().parse_args(["firenet-sim", "--kinds", "pan,dead_leaves", "--noise-levels", "none,none,high"])
+    spec = spec_from_args(args)
+    assert spec.data.kinds == ("pan", "dead_leaves") and spec.data.noise_levels == ("none", "none", "high")
+    run = _tiny_run(steps=4, val_every=4)
+    train(run, run_dir=tmp_path / "run", shard_root=tmp_path / "shards", export_dir=None, progress=False,
+          snapshot_every=2)
+    snaps = sorted(p.name for p in (tmp_path / "run" / "snapshots").iterdir())
+    assert snaps == ["step-00002", "step-00004"]
+    card = json.loads((tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.json").read_text())
+    assert card["steps"] == 4 and "val_ssim" in card["validation"]
+    last = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)["module"]
+    from neuspike.weights import load_safetensors
+
+    kept = load_safetensors(str(tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.safetensors"))
+    for k in last:
+        assert torch.equal(kept[k].to(last[k].dtype), last[k]), k
+    with pytest.raises(InputError, match="snapshot_every"):
+        train(run, run_dir=tmp_path / "run", shard_root=tmp_path / "shards", export_dir=None, progress=False,
+              snapshot_every=0)
