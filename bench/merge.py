@@ -16,6 +16,10 @@ provenance, each folder's own under ``merged_from``) and ``images/`` (every fold
 reconstructions side by side, so the report's grids show every method); then the report is rebuilt
 from them.
 
+With ``--replace`` the method sets may overlap: a method in a later folder replaces that method's
+rows, images and place in the method list of every earlier folder (a network trained further takes
+its old results' place: ``python -m bench.merge --replace reports/light reports/light runs/light-e2vid``).
+
 Writing is atomic per file; the output folder may be one of the inputs only if it is the first.
 
 Exit status: 0 merged; 2 folders that do not fit together (the message says what differs).
@@ -69,14 +73,17 @@ def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def merge_sweeps(out: str | Path, folders: Sequence[str | Path]) -> pd.DataFrame:
+def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: bool = False) -> pd.DataFrame:
     """Merge ``folders`` (see the module docstring) into ``out``; returns the merged results.
+
+    ``replace``: a method present in several folders keeps only its last folder's rows (otherwise
+    overlapping methods are an error).
 
     Raises
     ------
     InputError
         Fewer than two folders, a folder that is not a finished sweep, sweeps of different cells,
-        overlapping methods, or cells missing from a folder.
+        overlapping methods (without ``replace``), or cells missing from a folder.
     """
     folders = [Path(f) for f in folders]
     if len(folders) < 2:
@@ -96,8 +103,9 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path]) -> pd.DataFrame
             raise InputError(f"{folder} is a different sweep from {folders[0]} (differs in: {', '.join(changed)}); "
                              "only sweeps of the same cells merge")
         for method in pd.unique(frame["method"]):
-            if method in seen:
-                raise InputError(f"method {method!r} is in both {seen[method]} and {folder}; merge disjoint method sets")
+            if method in seen and not replace:
+                raise InputError(f"method {method!r} is in both {seen[method]} and {folder}; merge disjoint method sets "
+                                 "(or --replace to let the later folder's results take its place)")
             seen[method] = folder
         keys = set(map(tuple, frame[list(CELL_KEY)].astype(str).drop_duplicates().to_numpy()))
         if cells is None:
@@ -106,9 +114,14 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path]) -> pd.DataFrame
             raise InputError(f"{folder} does not hold the same cells as {folders[0]} "
                              f"({len(keys ^ cells)} cells in one only); finish both sweeps first")
 
-    merged = sort_rows(pd.concat([frame for _, _, frame in loaded], ignore_index=True))
+    # each method's rows come from the last folder that holds it (the only one without replace)
+    kept = [frame[frame["method"].map(lambda m, f=folder: seen[m] == f)] for folder, (_, _, frame) in zip(folders, loaded)]
+    merged = sort_rows(pd.concat(kept, ignore_index=True))
     sweep = dict(loaded[0][0]["sweep"])
-    sweep["methods"] = [m for _, (c, _, _) in zip(folders, loaded) for m in c["sweep"].get("methods", [])]
+    methods: list[str] = []
+    for _, (c, _, _) in zip(folders, loaded):
+        methods += [m for m in c["sweep"].get("methods", []) if m not in methods]
+    sweep["methods"] = methods
     sources = [{"folder": str(f), "methods": c["sweep"].get("methods", []), "sweep": c["sweep"],
                 "execution": c.get("execution")} for f, (c, _, _) in zip(folders, loaded)]
     metadata = dict(loaded[0][1])
@@ -141,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("out", help="output folder (results.csv, config.json, metadata.json, report)")
     p.add_argument("folders", nargs="+", help="two or more finished sweep folders of the same cells")
+    p.add_argument("--replace", action="store_true",
+                   help="a method in a later folder replaces the same method's results in earlier ones")
     p.add_argument("--no-report", action="store_true", help="do not rebuild the report")
     return p
 
@@ -148,7 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        merged = merge_sweeps(args.out, args.folders)
+        merged = merge_sweeps(args.out, args.folders, replace=args.replace)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

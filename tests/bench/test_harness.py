@@ -443,3 +443,37 @@ def test_merged_sweeps_equal_one_sweep_of_all_methods(plugin, tmp_path):
     with pytest.raises(InputError, match="not a finished sweep"):
         merge_sweeps(tmp_path / "y", [tmp_path / "a", tmp_path / "nothing"])
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_merge_with_replace_takes_a_methods_rows_from_the_last_folder_that_holds_it(plugin, tmp_path):
+    """A method retrained and rerun alone replaces its old rows (and keeps its place in the method list)."""
+    from bench.merge import main as merge_main, merge_sweeps
+    from bench.results import to_csv_text
+
+    import dataclasses
+
+    cache = str(tmp_path / "cache")
+
+    def spec(methods):
+        return dataclasses.replace(tiny_spec(methods), axis="light")
+
+    one = run_sweep(spec(["ht-mean", "ht-mean-x2"]), tmp_path / "one", quiet(plugin, cache_dir=cache))
+    new = run_sweep(spec(["ht-mean"]), tmp_path / "new", quiet(plugin, cache_dir=cache))
+    assert one.exit_code == new.exit_code == 0
+    # mark the later folder's numbers, so that where each row came from shows
+    rows = read_csv(tmp_path / "new" / "results.csv")
+    rows["value"] = rows["value"] + 1000.0
+    (tmp_path / "new" / "results.csv").write_text(to_csv_text(rows))
+    with pytest.raises(InputError, match="--replace"):
+        merge_sweeps(tmp_path / "m", [tmp_path / "one", tmp_path / "new"])
+    assert merge_main([str(tmp_path / "m"), str(tmp_path / "one"), str(tmp_path / "new"), "--replace", "--no-report"]) == 0
+    merged = read_csv(tmp_path / "m" / "results.csv")
+    old = read_csv(tmp_path / "one" / "results.csv")
+    mean = merged[merged["method"] == "ht-mean"]
+    assert len(mean) == len(rows) and mean["value"].notna().any()
+    assert (mean["value"].dropna() >= 1000.0).all()  # NaN: metrics undefined for the cell
+    x2 = merged[merged["method"] == "ht-mean-x2"].reset_index(drop=True)
+    same_numbers(x2, old[old["method"] == "ht-mean-x2"].reset_index(drop=True))
+    assert len(merged) == len(old)
+    config = json.loads((tmp_path / "m" / "config.json").read_text())
+    assert config["sweep"]["methods"] == ["ht-mean", "ht-mean-x2"]

@@ -1,15 +1,19 @@
 """Plug-in for choosing between trained ``e2vid`` weights on validation scenes (training photographs only).
 
-Registers ``e2vid-stage2`` and ``e2vid-stage3``: the ``e2vid`` network with the weights files
-``e2vid-stage2.safetensors`` and ``e2vid-stage3.safetensors``, looked up in the sweep's
-``--weights`` folder (the candidates are not shipped; see README.md beside this file).
+Registers ``e2vid-<name>`` for every candidate name: the ``e2vid`` network with the weights file
+``e2vid-<name>.safetensors``, looked up in the sweep's ``--weights`` folder (the candidates are not
+shipped; see README.md beside this file). The names are ``E2VID_CANDIDATES`` (comma-separated) when
+that variable is set, otherwise the stages compared so far.
 """
+
+import os
 
 from baselines.e2vid import E2VID
 
-CANDIDATES = ("stage2", "stage3")
+CANDIDATES = ("stage2", "stage3", "stage4")
 
 
 def register_methods(register):
-    for name in CANDIDATES:
+    names = [n.strip() for n in os.environ.get("E2VID_CANDIDATES", "").split(",") if n.strip()] or CANDIDATES
+    for name in names:
         register(f"e2vid-{name}", E2VID, params={"normalize": True}, weights=f"e2vid-{name}.safetensors")
