@@ -15,7 +15,7 @@ the occlusion mask (flow zero).
 Data (:func:`draw_cell`): the training photographs only (``TRAIN_PHOTOS``; the test photographs are
 refused), pan / zoom / fan scenes with random direction, speed, zoom rate, focus, rpm and blades,
 and on request procedural ``dead_leaves`` scenes (occluding layers, endless variety),
-linear or high-dynamic-range radiance, motion scale S in {16, ..., 256}, light L in {1/2, ..., 1/32},
+linear or high-dynamic-range radiance (``hdr_fraction`` of the items), motion scale S in {16, ..., 256}, light L in {1/2, ..., 1/32},
 event contrast threshold log-uniform in ``threshold_range``, and noise level none..high drawn
 uniformly over ``noise_levels`` (the event shot noise of the paper's levels; a level listed twice is
 drawn twice as often). Items are simulated once into a *shard*
@@ -106,6 +106,10 @@ class DataSpec:
     photos: tuple[str, ...] = TRAIN_PHOTOS
     displacement_px: float = 8.0
     view: tuple[int, int] | None = None
+    #: Share of items whose photograph is mapped to radiance through a drawn dynamic range of 10 to
+    #: 1,000 (darker, high-contrast targets); the rest are linear in luma, like the sweeps' scenes.
+    #: Left out of the shard key at its default.
+    hdr_fraction: float = 0.5
 
     # ``kinds`` and ``noise_levels`` are drawn uniformly over the tuple, so a repeated entry is drawn
     # more often (``("none", "none", "small", "medium", "high")``: clean events two times in five).
@@ -133,6 +137,8 @@ class DataSpec:
             if vw < self.size or vh < self.size:
                 raise InputError(f"view: {vw}x{vh} is smaller than the {self.size}x{self.size} items cut from it")
             object.__setattr__(self, "view", (vw, vh))
+        if not 0.0 <= self.hdr_fraction <= 1.0:
+            raise InputError(f"hdr_fraction: expected a share in [0, 1], got {self.hdr_fraction}")
         lo, hi = self.threshold_range
         if not 0 < lo <= hi:
             raise InputError(f"threshold_range: expected 0 < low <= high, got {self.threshold_range}")
@@ -141,6 +147,8 @@ class DataSpec:
         d = dataclasses.asdict(self)
         if d["view"] is None:  # absent rather than null: shards made before the field keep their key
             del d["view"]
+        if d["hdr_fraction"] == 0.5:  # likewise
+            del d["hdr_fraction"]
         text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
@@ -221,7 +229,9 @@ def draw_cell(data: DataSpec, rng: np.random.Generator) -> Cell:
     kind = str(rng.choice(data.kinds))
     photo = str(rng.choice(data.photos))
     size = (data.size, data.size) if data.view is None else data.view
-    dynamic_range = None if rng.random() < 0.5 else float(np.exp(rng.uniform(np.log(10), np.log(1000))))
+    # linear when u < 1 - hdr_fraction: the default 0.5 draws exactly as before the field existed
+    linear = rng.random() < 1.0 - data.hdr_fraction
+    dynamic_range = None if linear else float(np.exp(rng.uniform(np.log(10), np.log(1000))))
     common: dict[str, Any] = dict(image=photo, size=size, dynamic_range=dynamic_range)
     if data.view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
         x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in data.view)
@@ -776,6 +786,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise-levels", default=None, metavar="N1,N2,...",
                    help="event noise levels drawn for the items (default none,small,medium,high); a level listed "
                         "twice is drawn twice as often")
+    p.add_argument("--hdr-fraction", type=float, default=None, metavar="F",
+                   help="share of items with high-dynamic-range radiance (dark, high-contrast targets; default 0.5); "
+                        "the rest are linear in luma like the sweeps' scenes")
     p.add_argument("--snapshot-every", type=int, default=None, metavar="N",
                    help="also keep every N-th step's weights under RUN_DIR/snapshots/ (to choose between them later)")
     p.add_argument("--simulate-only", action="store_true", help="build the sequence shard and stop")
@@ -802,6 +815,8 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         from neuspike.checks import parse_size
 
         data_kw["view"] = parse_size(args.view)
+    if args.hdr_fraction is not None:
+        data_kw["hdr_fraction"] = args.hdr_fraction
     for name, field_name in (("kinds", "kinds"), ("noise_levels", "noise_levels")):
         text = getattr(args, name)
         if text is not None:

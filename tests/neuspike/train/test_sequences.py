@@ -343,3 +343,15 @@ def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
     with pytest.raises(InputError, match="snapshot_every"):
         train(run, run_dir=tmp_path / "run", shard_root=tmp_path / "shards", export_dir=None, progress=False,
               snapshot_every=0)
+
+
+def test_hdr_fraction_sets_the_share_of_high_dynamic_range_items():
+    """0 gives only linear scenes (the sweeps' radiance model), 1 only HDR ones; the default 0.5 keeps the old key."""
+    rng = np.random.default_rng(3)
+    linear = DataSpec(size=32, kinds=("pan",), hdr_fraction=0.0)
+    assert all(draw_cell(linear, rng).scene.dynamic_range is None for _ in range(200))
+    hdr = dataclasses.replace(linear, hdr_fraction=1.0)
+    assert all(10 <= draw_cell(hdr, rng).scene.dynamic_range <= 1000 for _ in range(200))
+    assert DataSpec(hdr_fraction=0.5).key() == DataSpec().key() == "f40df6737f28" != DataSpec(hdr_fraction=0.0).key()
+    with pytest.raises(InputError, match="hdr_fraction"):
+        DataSpec(hdr_fraction=1.5)
