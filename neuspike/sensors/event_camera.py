@@ -609,23 +609,24 @@ class _Capture:
                     self.drain()  # no write may be pending into arrays about to be replaced
                 outputs = self.out.extend(n_events)
                 if self.pool is None:
-                    self.finish_interval(keys, t_prev, dt / q_one, outputs)
+                    self.finish_interval(keys, t_prev, dt / q_one, t_k, outputs)
                 else:
                     # fresh output memory costs a page fault per 4 KiB on first touch: fault the
                     # times in here, so that the two threads carry about the same load
                     outputs[0].fill(0.0)
-                    self.pending.append(self.pool.submit(self.finish_interval, keys, t_prev, dt / q_one, outputs))
+                    self.pending.append(self.pool.submit(self.finish_interval, keys, t_prev, dt / q_one, t_k, outputs))
                 jobs += 1
             sig, spare = spare, sig
             t_prev = t_k
         self.final_state = sig, mem, t_prev
 
-    def finish_interval(self, keys: np.ndarray, t_a: float, scale: float, outputs: list[np.ndarray]) -> None:
+    def finish_interval(self, keys: np.ndarray, t_a: float, scale: float, t_b: float,
+                        outputs: list[np.ndarray]) -> None:
         """Order one interval's keys (NumPy's vectorised sort) and decode them into the output."""
         from neuspike.sensors import event_kernels
 
         keys.sort()  # the keys are distinct integers up to duplicates: the NumPy path's order exactly
-        event_kernels.write_events(keys, self.cam._pix_bits, self.cam.width, t_a, scale, *outputs)
+        event_kernels.write_events(keys, self.cam._pix_bits, self.cam.width, t_a, scale, t_b, *outputs)
 
     def log_of(self, radiance: np.ndarray, out: np.ndarray) -> np.ndarray:
         """``log(max(radiance, floor))`` into ``out``: NumPy's float32 log (not the C library's)."""
@@ -710,7 +711,7 @@ class _Capture:
                 if noise is not None:
                     noise = self.noise_pixels(noise, sig, mem, dt)
                 self.switch("dvs_pixel")
-            self.interval(sig, mem, t_prev, dt, noise, nz)
+            self.interval(sig, mem, t_prev, dt, noise, nz, t_k)
             sig, spare = sig_new, sig
             t_prev = t_k
         self.final_state = sig, mem, t_prev
@@ -809,8 +810,8 @@ class _Capture:
 
     # ------------------------------------------------------------------ events
     def interval(self, sig: np.ndarray, mem: np.ndarray, t_a: float, dt: float, noise,
-                 nz: np.ndarray | None = None) -> None:
-        """The events of one interval. On entry ``self.d1 = sig_new - mem`` for every pixel.
+                 nz: np.ndarray | None, t_b: float) -> None:
+        """The events of one interval ``[t_a, t_b]`` (``dt = t_b - t_a``). On entry ``self.d1 = sig_new - mem`` for every pixel.
 
         ``nz``: the crossing pixels (ascending) when the compiled pixel pass found them already.
         """
@@ -847,12 +848,16 @@ class _Capture:
             self.drain()  # no write may be pending into arrays about to be replaced
         outputs = self.out.extend(keys.size)
         if self.pool is None:
-            self.write_events(keys, t_a, dt / q_one, outputs)
+            self.write_events(keys, t_a, dt / q_one, t_b, outputs)
         else:
-            self.pending.append(self.pool.submit(self.write_events, keys, t_a, dt / q_one, outputs))
+            self.pending.append(self.pool.submit(self.write_events, keys, t_a, dt / q_one, t_b, outputs))
 
-    def write_events(self, keys: np.ndarray, t_a: float, scale: float, outputs: list[np.ndarray]) -> None:
-        """Sort one interval's keys and write the events into their slots of the output."""
+    def write_events(self, keys: np.ndarray, t_a: float, scale: float, t_b: float, outputs: list[np.ndarray]) -> None:
+        """Sort one interval's keys and write the events into their slots of the output.
+
+        Times are ``t_a + fraction * scale``, at most ``t_b`` (the interval's end as the loop holds
+        it): a fraction near one can round above it, out of order with the next interval's events.
+        """
         t, x, y, p = outputs
         keys.sort()
         pix_pol = keys & self.cam._pix_mask
@@ -861,6 +866,7 @@ class _Capture:
         keys >>= self.cam._pix_bits
         np.multiply(keys, scale, out=t)
         t += t_a
+        np.minimum(t, t_b, out=t)
 
     def drain(self) -> None:
         """Wait for the pending writes (and raise their errors)."""

@@ -378,15 +378,20 @@ def noise_keys(pix_n, f_n, on_n, sig, mem, d1, leak, dt, th_on, th_off, q_one, p
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def write_events(keys, pix_bits, width, t_a, scale, t_out, x_out, y_out, p_out):
-    """Decode sorted keys into events: ``t = t_a + fraction * scale`` (float64), x, y (uint16), p (int8 +-1)."""
+def write_events(keys, pix_bits, width, t_a, scale, t_b, t_out, x_out, y_out, p_out):
+    """Decode sorted keys into events: ``t = min(t_a + fraction * scale, t_b)`` (float64), x, y (uint16), p (int8 +-1).
+
+    ``t_b`` is the interval's end as the caller holds it (the next interval's ``t_a``): a fraction
+    near one can round above it, which would put the event after the next interval's first ones.
+    """
     pix_mask = (np.int64(1) << pix_bits) - 1
     inv_width = 1.0 / width
     for e in range(keys.shape[0]):
         k = keys[e]
         low = k & pix_mask
         pix = low >> 1
-        t_out[e] = np.float64(k >> pix_bits) * scale + t_a
+        t = np.float64(k >> pix_bits) * scale + t_a
+        t_out[e] = t if t < t_b else t_b
         # pix // width without an integer division: a float estimate, corrected by one either way
         y = np.int64(np.float64(pix) * inv_width)
         y = y + 1 if (y + 1) * width <= pix else y

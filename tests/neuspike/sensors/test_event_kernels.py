@@ -154,3 +154,46 @@ def test_shot_noise_stage_keeps_its_own_time_and_refractory_is_fused():
     by_name = {x["name"]: x for x in s.meta["stages"]}
     assert by_name["refractory"]["fused_into"] == "dvs_pixel"
     assert "fused_into" not in by_name["shot_noise"] and by_name["shot_noise"]["seconds"] > 0
+
+
+def test_an_interval_ending_crossing_never_lands_after_the_next_intervals_events():
+    """Sensor instants -0.0003 and -0.0001 (history frames): ``t_a + (t_b - t_a)`` rounds one ulp above
+    ``t_b``, so a crossing at the interval's very end used to be written after the next interval's
+    first events (an unsorted stream, refused downstream). The compiled writer clamps it to ``t_b``."""
+    from neuspike.sensors import event_kernels
+
+    t_a, t_b = -0.00030000000000000003, -0.0001
+    assert t_a + (t_b - t_a) > t_b  # the rounding this guards against
+    pix_bits, width, q_one = 8, 4, 2 ** 44
+    scale = (t_b - t_a) / q_one
+    pixel_pol = np.array([2 * 3 + 1, 2 * 1 + 0], np.int64)  # pixel 3 ON, pixel 1 OFF
+    fractions = np.array([q_one - 2 ** 20, q_one], np.int64)  # well inside, and at the very end
+    keys = (fractions << pix_bits) | pixel_pol
+    out = [np.empty(2), np.empty(2, np.uint16), np.empty(2, np.uint16), np.empty(2, np.int8)]
+    event_kernels.write_events(keys, pix_bits, width, t_a, scale, t_b, *out)
+    assert out[0][1] == t_b and t_a < out[0][0] < t_b
+    assert out[1].tolist() == [3, 1] and out[3].tolist() == [1, -1]
+
+
+def test_a_history_boundary_crossing_gives_a_sorted_stream_on_both_backends():
+    """The training cell that met the rounding above (a fan at S = 64 with event history and medium
+    noise): every event is in time order, and both backends agree byte for byte."""
+    from unittest import mock
+
+    import neuspike.sensors.event_camera as event_camera
+    from neuspike.conditions import Condition
+    from neuspike.scenes import SceneSpec
+    from neuspike.simulate import SensorConfig, simulate_sample
+
+    scene = SceneSpec("fan", image="coffee", size=(128, 128), rpm=-1617.7994873558214, blades=5,
+                      blade_width_deg=15.206296815359472, blade_contrast=0.30109810296906725)
+    condition = Condition(light=0.0625, motion=64, noise="medium")
+    sensor = SensorConfig(event_threshold=0.11255869399151351)
+    streams = {}
+    for backend in ("numba", "numpy"):
+        with mock.patch.object(event_camera, "resolve_backend", lambda requested, b=backend: b):
+            sample = simulate_sample(scene, condition, sensor=sensor, seed=384770998, modalities={"events"},
+                                     history_s=0.011)
+        streams[backend] = sample.events
+        assert len(sample.events) > 10_000 and (np.diff(sample.events.t_s) >= 0).all()
+    assert events_of(streams["numba"]) == events_of(streams["numpy"])
