@@ -9,6 +9,9 @@ the same sequences for orientation. Stage 3 (from stage 2's best, at step 1,900:
 400x250 views, cosine learning rate) is scored on its own 16 validation sequences, cut the same way,
 so its curve is drawn on a second axis with the scores of the published FireNet and ``firenet-sim``
 on those sequences (``validation_view.csv``, ``python reports/e2vid/validation.py --view 400x250``).
+The third panel is the measure weights are chosen by since stage 3: the sweep harness on training
+photographs (``candidates/results.csv``, mean SSIM over its 16 cells) for stage 2's weights and the
+snapshots of stages 5 and 6 (both from stage 2's weights), with the published FireNet for orientation.
 Writes training_curves.png.
 """
 
@@ -32,7 +35,7 @@ def val(name: str, offset: int = 0) -> pd.DataFrame:
     return log.assign(step=log.step + offset)
 
 
-fig, (ax, ax3) = plt.subplots(1, 2, figsize=(11, 3.8))
+fig, (ax, ax3, axh) = plt.subplots(1, 3, figsize=(16, 3.8))
 fs = val("firenet-sim_train_log.csv")
 ax.plot(fs.step, fs.val_ssim, "-", label="firenet-sim")
 s1 = val("e2vid_train_log.csv")
@@ -59,6 +62,19 @@ if (here / "e2vid_stage3_train_log.csv").is_file():
     ax3.legend(fontsize=8)
 else:
     ax3.set_visible(False)
+harness = pd.read_csv(here / "candidates" / "results.csv")
+harness = harness[(harness.metric == "ssim") & (harness.status == "ok")].groupby("method")["value"].mean()
+for prefix, label, color in (("e2vid-s5-", "stage 5 (16-window sequences, dead leaves)", "C3"),
+                             ("e2vid-s6-", "stage 6 (linear radiance, clean x2; shipped at 200)", "C2")):
+    names = sorted(m for m in harness.index if m.startswith(prefix))
+    steps = [0] + [int(m[len(prefix):]) for m in names]
+    axh.plot(steps, [harness["e2vid-stage2"]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
+axh.axhline(harness["firenet"], color="grey", ls=":", label="firenet (published)")
+axh.axhline(harness["e2vid-stage3"], color="C1", ls="--", label="stage 3 (not shipped)")
+axh.set_xlabel("optimiser steps after stage 2's weights")
+axh.set_ylabel("harness SSIM")
+axh.set_title("sweep harness on training photographs, 400x250 (16 cells)", fontsize=9)
+axh.legend(fontsize=8)
 fig.tight_layout()
 fig.savefig(here / "training_curves.png", dpi=120)
 print(f"best: firenet-sim {fs.val_ssim.max():.3f}, e2vid stage 1 {s1.val_ssim.max():.3f}, "
