@@ -817,10 +817,10 @@ def spec_from_args(args: argparse.Namespace) -> TrainSpec:
         data_kw["view"] = parse_size(args.view)
     if args.hdr_fraction is not None:
         data_kw["hdr_fraction"] = args.hdr_fraction
-    for name, field_name in (("kinds", "kinds"), ("noise_levels", "noise_levels")):
+    for name in ("kinds", "noise_levels"):
         text = getattr(args, name)
         if text is not None:
-            data_kw[field_name] = tuple(v.strip() for v in text.split(",") if v.strip())
+            data_kw[name] = tuple(v.strip() for v in text.split(",") if v.strip())
     if args.precision is not None:
         kw["precision"] = args.precision
     if args.init_from is not None:
