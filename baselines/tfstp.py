@@ -59,6 +59,7 @@ occur, plane by plane, over the pixels that fire in that plane.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -185,14 +186,22 @@ def stp_step(
     return q, v
 
 
+# The C library's scalar log1p and log, the functions the compiled read-out calls. NumPy's own
+# ufuncs pick SIMD kernels by CPU (AVX-512 ones round differently from the C library in about one
+# value in twenty), so the reference calls the same scalar functions to stay equal bit for bit.
+_scalar_log1p = np.frompyfunc(math.log1p, 1, 1)
+_scalar_log = np.frompyfunc(math.log, 1, 1)
+
+
 def _log1p_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``log1p(a / b)`` for ``0 < a <= 1`` and ``b > 0``, without overflow for tiny ``b``."""
+    """``log1p(a / b)`` for ``0 < a <= 1`` and ``b > 0``, without overflow for tiny ``b``; the C
+    library's scalar functions, as the compiled read-out (see ``_scalar_log1p``)."""
     out = np.empty_like(b)
     ok = b >= _TINY
-    out[ok] = np.log1p(a[ok] / b[ok])
+    out[ok] = _scalar_log1p(a[ok] / b[ok])
     tiny = ~ok
     if tiny.any():
-        out[tiny] = np.log(a[tiny] + b[tiny]) - np.log(b[tiny])
+        out[tiny] = _scalar_log(a[tiny] + b[tiny]).astype(np.float64) - _scalar_log(b[tiny]).astype(np.float64)
     return out
 
 

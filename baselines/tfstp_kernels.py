@@ -3,7 +3,7 @@
 The plane loop of :func:`baselines.tfstp.tfstp_state` fused into one pass per band of rows: each
 pixel visits its own spikes and updates its two states, in float64 with the operations of the NumPy
 reference (:func:`baselines.tfstp._step_inplace`) in the same order, so the states are equal bit for
-bit; :func:`tfstp_rate_fused` reads the rate out in the same pass (``math.log1p``, as NumPy's).
+bit; :func:`tfstp_rate_fused` reads the rate out in the same pass (``math.log1p``, the C library's, as the reference).
 Bands are independent and run in parallel (``prange``) on ``numba.get_num_threads()`` threads.
 
 Import this module only where numba is importable.
