@@ -120,7 +120,7 @@ import numpy as np
 import torch
 
 from neuspike.normalisation import rate_to_image
-from neuspike.checks import check_nonnegative, check_positive
+from neuspike.checks import check_int, check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.parallel import KERNEL_LOCK, parallel_usable
@@ -386,8 +386,7 @@ def _check_planes(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
         raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
     if min(planes.shape) < 1:
         raise InputError(f"planes: expected at least one plane of at least 1x1 pixels, got shape {planes.shape}")
-    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
-        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
+    key_plane = check_int("key_plane", key_plane, what="an integer plane index")
     if not 0 <= key_plane < planes.shape[0]:
         raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
     return np.ascontiguousarray(planes), int(key_plane)

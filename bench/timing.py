@@ -48,6 +48,7 @@ import pandas as pd
 
 from bench import grid as grids
 from bench import tables as tb
+from neuspike.checks import check_int
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
 from neuspike.sample import Sample
@@ -108,9 +109,7 @@ class TimingStats:
 
 def check_count(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int when it is a whole number >= ``minimum``; else :class:`InputError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
-    return int(value)
+    return check_int(name, value, minimum=minimum)
 
 
 def time_callable(fn: Callable[[], Any], *, repeats: int, warmup: int, setup: Callable[[], Any] | None = None,

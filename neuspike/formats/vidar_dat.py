@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from neuspike.atomic import publish
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.checks import check_int, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
@@ -315,8 +315,7 @@ def read_dat(
     for name, value in (("start", start), ("stop", stop)):
         if value is None and name == "stop":
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise InputError(f"{name}: expected a whole plane index, got {value!r}")
+        check_int(name, value, what="a whole plane index")
     first = int(start)
     last = total if stop is None else int(stop)
     if not 0 <= first <= last <= total:
