@@ -123,7 +123,7 @@ from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_int, check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 __all__ = [
@@ -512,14 +512,7 @@ def snm_state(
 
 def _resolve_backend(backend: Any) -> str:
     """``"numba"`` or ``"torch"`` for a requested backend (see :data:`BACKENDS`)."""
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if _kernels is not None and parallel_usable() else "torch"
-    if backend == "numba" and _kernels is None:
-        raise InputError("backend 'numba': numba cannot be imported here; use backend='torch' or 'auto'")
-    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
-    return backend if parallel_usable() else "torch"
+    return resolve_backend(backend, compiled=_kernels is not None, reference="torch")
 
 
 def _still_decay(p: _Params) -> np.float32:

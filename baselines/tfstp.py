@@ -68,7 +68,7 @@ from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 U0 = 0.15
@@ -118,14 +118,7 @@ def check_stp_params(
 
 def _resolve_backend(backend: Any) -> str:
     """``"numba"`` or ``"numpy"`` for a requested backend (see :data:`BACKENDS`)."""
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if _kernels is not None and parallel_usable() else "numpy"
-    if backend == "numba" and _kernels is None:
-        raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
-    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
-    return backend if parallel_usable() else "numpy"
+    return resolve_backend(backend, compiled=_kernels is not None)
 
 
 def _step_inplace(

@@ -35,7 +35,7 @@ import numpy as np
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.sensors.backends import NUMBA_AVAILABLE
+from neuspike.parallel import NUMBA_AVAILABLE
 from neuspike.sensors.event_camera import EventCamera
 from neuspike.sensors.spike_camera import SpikeCamera
 
@@ -179,7 +179,7 @@ def numpy_reference_paths() -> Iterator[None]:
     import neuspike.sensors.event_camera as event_camera
     import neuspike.sensors.spike_camera as spike_camera
 
-    def numpy_only(backend: str) -> str:
+    def numpy_only(backend: str, **_: object) -> str:
         return "numpy"
 
     with mock.patch.object(event_camera, "resolve_backend", numpy_only), \

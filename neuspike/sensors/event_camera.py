@@ -83,7 +83,7 @@ import numpy as np
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
-from neuspike.sensors.backends import resolve_backend
+from neuspike.parallel import resolve_backend
 from neuspike.streams import EventStream
 
 __all__ = [
