@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 import torch
 
@@ -49,6 +48,7 @@ from neuspike import methods as registry
 from neuspike.cache import RecordingCache
 from neuspike.errors import InputError
 from neuspike.jsonio import canonical_json
+from neuspike.parallel import set_threads
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
 from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording, static_region
 
@@ -205,12 +205,7 @@ def prepare_worker(setup: WorkerSetup) -> int:
     """
     load_plugins(plugin_names(setup.plugins))
     if setup.threads is not None:
-        threads = int(setup.threads)
-        # numba first: starting its OpenMP threading layer resets the OpenMP pool size torch reads
-        if numba.get_num_threads() != min(threads, numba.config.NUMBA_NUM_THREADS):
-            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-        if torch.get_num_threads() != threads:
-            torch.set_num_threads(threads)
+        return set_threads(int(setup.threads))
     return int(torch.get_num_threads())
 
 

@@ -51,6 +51,7 @@ from bench import tables as tb
 from neuspike.checks import check_int
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
+from neuspike.parallel import set_threads
 from neuspike.sample import Sample
 from neuspike.simulate import DEFAULT_HISTORY_WINDOWS, SensorConfig, simulate_sample
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
@@ -310,8 +311,8 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
                                            modalities=sorted(needs), seed=seed)
         for name in names:
             method, reason = created[name]
-            if threads is not None and torch.get_num_threads() != threads:
-                torch.set_num_threads(threads)
+            if threads is not None:
+                set_threads(threads)
             row: dict[str, Any] = {c: math.nan for c in TIMING_COLUMNS}
             row.update(method=name, resolution=res, width=width, height=height, threads=torch.get_num_threads(),
                        error="", **method_info(name, method))
@@ -464,7 +465,7 @@ def run(args: argparse.Namespace) -> Path:
         origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
         raise InputError(f"{origin}: {str(weights)!r} is not a folder")
     if args.threads is not None:
-        torch.set_num_threads(check_count("--threads", args.threads, 1))
+        set_threads(check_count("--threads", args.threads, 1))
     preset = FULL if args.full else QUICK
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]

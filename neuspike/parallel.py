@@ -24,9 +24,10 @@ import os
 import threading
 from typing import Any
 
+from neuspike.checks import check_positive_int
 from neuspike.errors import InputError
 
-__all__ = ["KERNEL_LOCK", "NUMBA_AVAILABLE", "parallel_usable", "resolve_backend"]
+__all__ = ["KERNEL_LOCK", "NUMBA_AVAILABLE", "parallel_usable", "resolve_backend", "set_threads"]
 
 #: Whether numba is installed (a dependency, but every stage must still run where it is not). Found
 #: without importing it, so that importing this module stays cheap.
@@ -99,3 +100,25 @@ def resolve_backend(backend: Any, *, compiled: bool | None = None, reference: st
     if backend == reference or not available or not parallel_usable():
         return reference
     return "numba"
+
+
+def set_threads(threads: int) -> int:
+    """Give numba's pool and torch's intra-op pool ``threads`` threads each (numba: at most the
+    count it was started with); return torch's count.
+
+    The one place that pins threads, in one order: numba first, because starting its OpenMP
+    threading layer resets the OpenMP pool size that torch reads. A pool already at the count is
+    left alone (setting numba's is not free once its layer runs).
+    """
+    threads = check_positive_int("threads", threads)
+    if NUMBA_AVAILABLE:
+        import numba
+
+        wanted = min(threads, numba.config.NUMBA_NUM_THREADS)
+        if numba.get_num_threads() != wanted:
+            numba.set_num_threads(wanted)
+    import torch
+
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+    return int(torch.get_num_threads())
