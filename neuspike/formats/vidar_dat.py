@@ -16,13 +16,12 @@ rename it into place only when everything was written, so a failure leaves no pa
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.atomic import publish, temp_beside
 from neuspike.checks import check_int, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
@@ -105,7 +104,7 @@ class DatWriter:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self._path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=self._path.parent, prefix=f".{self._path.name}.", suffix=".tmp")
+        fd, tmp = temp_beside(self._path)
         self._tmp = Path(tmp)
         self._file = os.fdopen(fd, "wb")
         self._shape: tuple[int, int] | None = None
