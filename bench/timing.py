@@ -1,6 +1,7 @@
 """Time per frame of every method (the paper's Table 2): ``python -m bench.timing``.
 
-For each resolution (240x180, 346x260, 400x250, 640x480 by default) one representative recording is
+For each resolution (400x250 by default, the paper's four with ``--full``: 240x180, 346x260, 400x250,
+640x480) one representative recording is
 simulated once: the ``camera`` photograph panning (the sweeps' pan scene, scaled to the width) at
 L = 1/4, S = 128, 256 planes, both modalities, with the sweeps' default effects and
 ``--history-windows`` windows of event history for recurrent methods to warm up on. Every method
@@ -59,8 +60,8 @@ from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 #: Default resolutions (width, height): the paper's Table 2.
 RESOLUTIONS: tuple[tuple[int, int], ...] = tb.TABLE2_RESOLUTIONS
 #: Timed and warm-up calls: quick (the default) and full.
-QUICK = {"repeats": 3, "warmup": 1}
-FULL = {"repeats": 10, "warmup": 2}
+QUICK = {"repeats": 3, "warmup": 1, "sizes": ((400, 250),)}
+FULL = {"repeats": 10, "warmup": 2, "sizes": RESOLUTIONS}
 #: The representative condition.
 LIGHT, MOTION, PLANES = 0.25, 128, 256
 #: Result folders searched (newest first) for the accuracy-versus-time chart.
@@ -106,6 +107,10 @@ class TimingStats:
     @property
     def median_ms(self) -> float:
         return self.summary()["median_ms"]
+
+
+def _sizes_text(sizes: Iterable[tuple[int, int]]) -> str:
+    return ", ".join(f"{w}x{h}" for w, h in sizes)
 
 
 def check_count(name: str, value: Any, minimum: int) -> int:
@@ -394,24 +399,28 @@ def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m bench.timing",
-        description="Time per frame of every registered method at the paper's Table 2 resolutions (median and "
+        description="Time per frame of every registered method (median and "
         "spread after warm-up, torch threads recorded, learned parameter counts), beside the paper's published "
         "figures; and the accuracy-versus-time chart joined with the latest sweep results.",
         epilog="examples:\n"
-        "  python -m bench.timing                                   # quick: 5 timed calls per method and size\n"
+        f"  python -m bench.timing                                   # quick: {QUICK['repeats']} timed calls per method at "
+        f"{_sizes_text(QUICK['sizes'])}\n"
         "  python -m bench.timing --full --weights ../shared/weights/firenet\n"
         "  python -m bench.timing --methods tfp,tfi --sizes 400x250 --results runs/light\n\n"
+        "--full: the paper's Table 2 resolutions (" + _sizes_text(FULL["sizes"]) + ").\n"
         "recurrent methods (FireNet): ms per frame is one network step (one event voxel grid); the whole call,\n"
         "warm-up over the event history included, is in timing.csv (median_ms). Timings on a shared machine\n"
         "are noisy: min, max and quartiles are in timing.csv.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--methods", help="comma-separated registry names (default: every registered method)")
-    parser.add_argument("--sizes", help="comma-separated WxH (default: " + ",".join(f"{w}x{h}" for w, h in RESOLUTIONS) + ")")
+    parser.add_argument("--sizes", help=f"comma-separated WxH (default: {_sizes_text(QUICK['sizes'])}; "
+                                        f"with --full {_sizes_text(FULL['sizes'])})")
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--quick", action="store_true", help=f"the default: {QUICK['repeats']} timed calls after "
-                      f"{QUICK['warmup']} warm-up call(s)")
-    mode.add_argument("--full", action="store_true", help=f"{FULL['repeats']} timed calls after {FULL['warmup']} warm-up calls")
+                      f"{QUICK['warmup']} warm-up call(s), at {_sizes_text(QUICK['sizes'])}")
+    mode.add_argument("--full", action="store_true", help=f"{FULL['repeats']} timed calls after {FULL['warmup']} warm-up "
+                      f"calls, at the paper's four resolutions")
     parser.add_argument("--repeats", type=int, help="timed calls per method and size (overrides --quick/--full)")
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
@@ -469,7 +478,7 @@ def run(args: argparse.Namespace) -> Path:
     preset = FULL if args.full else QUICK
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
-    sizes = parse_sizes(args.sizes) if args.sizes else RESOLUTIONS
+    sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     names = method_names(args.methods)
     out = Path(args.out or ("runs/timing-full" if args.full else "runs/timing"))
     from neuspike.formats.staging import check_writable_folder
