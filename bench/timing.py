@@ -466,7 +466,7 @@ def run(args: argparse.Namespace) -> Path:
     import torch
 
     from neuspike.atomic import write_json, write_text
-    from bench.provenance import machine, now_iso, package_versions, source_state
+    from bench.provenance import command_line, machine, now_iso, package_versions, source_state
     from bench.report import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)
@@ -506,7 +506,7 @@ def run(args: argparse.Namespace) -> Path:
                          "weights": str(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
-            "command": [sys.executable, *sys.argv], "executor": {"executor": "timing", "workers": 1},
+            "command": command_line(), "executor": {"executor": "timing", "workers": 1},
             "threads": torch.get_num_threads(), "timing_contended": False, "start": now_iso(), "end": None}
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
