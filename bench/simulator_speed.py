@@ -192,7 +192,8 @@ def window_cases(sizes=WINDOW_SIZES) -> list[Case]:
     """One simulated window of the sweep's default cell per run, compiled and on the reference paths."""
     from bench.grid import DEFAULT_EFFECTS
     from neuspike.conditions import Condition
-    from neuspike.simulate import SensorConfig, simulate_sample
+    from neuspike.simulation.cell import simulate_sample
+    from neuspike.simulation.recording import SensorConfig
 
     condition = Condition(light=0.25, motion=128, effects=DEFAULT_EFFECTS)
     out = []

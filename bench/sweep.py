@@ -13,7 +13,10 @@ into its output folder:
 ``images/``         reconstructions and ground truth for the report's figure grid, in the layout
                     of :mod:`bench.report` (``images/<scene>/<axis>=<value>/<method>.png``): for the
                     swept axis, of the first seed with the other axes at their first value
-``cache/``          simulated recordings (:mod:`neuspike.cache`), unless ``--cache`` points elsewhere
+``cache/``          simulated recordings (:mod:`neuspike.simulation.cache`), unless ``--cache`` points elsewhere:
+                    one file per modality, so a method added to a finished sweep simulates nothing
+                    again, except the events when it is the sweep's first recurrent method that reads
+                    them (its warm-up history changes the event camera's state; the summary says so)
 
 Resuming
     Finished cells are never recomputed: a rerun of the same command after a crash, an interrupt or
@@ -58,7 +61,7 @@ from neuspike.atomic import write_json, write_text
 from neuspike.conditions import parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.jsonio import canonical_json, stable_hash
-from neuspike.simulate import DEFAULT_HISTORY_WINDOWS
+from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
@@ -102,7 +105,7 @@ class SweepSpec:
     axis: str | None = None
 
     def __post_init__(self) -> None:
-        from neuspike.simulate import SensorConfig
+        from neuspike.simulation.recording import SensorConfig
 
         if self.sensor is None:
             object.__setattr__(self, "sensor", SensorConfig())
@@ -205,6 +208,11 @@ class SweepOutcome:
     report_path: Path | None = None
     report_note: str | None = None
     report_failed: bool = False
+    #: Cells of this run that simulated each modality (the rest came from the recording cache).
+    simulated: dict[str, int] = field(default_factory=dict)
+    #: The event history simulated before each window, seconds (part of a cached event recording's key).
+    history_s: float = 0.0
+    use_cache: bool = True
 
     @property
     def exit_code(self) -> int:
@@ -219,6 +227,8 @@ class SweepOutcome:
                  + (f", {self.n_missing} missing (rerun to complete them)" if self.n_missing else "")
                  + f" ({self.n_computed} computed now, {self.n_cache_hits} from the recording cache; "
                  f"{self.seconds:.1f} s)"]
+        if self.use_cache and any(self.simulated.values()):
+            lines.append(self._cache_note())
         for name, reason in sorted(self.skipped.items()):
             lines.append(f"skipped {name}: {reason}")
         if self.time_split:
@@ -228,6 +238,15 @@ class SweepOutcome:
         if self.n_failed and self.allow_failures:
             lines.append("failures allowed (--allow-failures): see the error column and errors/")
         return "\n".join(lines)
+
+
+    def _cache_note(self) -> str:
+        """What was simulated and when the recording cache serves it (one line)."""
+        done = ", ".join(f"{m} for {n}" for m, n in sorted(self.simulated.items()) if n)
+        history = (f"{self.history_s:g} s here, as a recurrent method reads events" if self.history_s
+                   else "none here, as no recurrent method reads events")
+        return (f"simulated now: {done} of {self.n_computed} recordings (cached spikes serve every later sweep "
+                f"of the same cells; cached events only one with the same event history: {history})")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -490,6 +509,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     write_json(out / "metadata.json", run)
 
     n_failed_now = n_hits = n_computed = 0
+    n_simulated: dict[str, int] = {}
     crashed: dict[str, str] = {}
     observed_threads: set[int] = set()
     skipped: dict[str, str] = dict(resolved["unavailable"])
@@ -522,6 +542,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
                     done[task.cell_id] = result.status
                     n_computed += 1
                     n_hits += int(result.cache_hit)
+                    for modality in result.simulated:
+                        n_simulated[modality] = n_simulated.get(modality, 0) + 1
                     n_failed_now += int(result.status == ERROR)
                     skipped.update(result.skipped)
                     if result.threads is not None:
@@ -541,6 +563,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         n_failed=n_failed, n_missing=n_missing, n_computed=n_computed, n_cache_hits=n_hits,
         skipped=skipped, allow_failures=execution.allow_failures,
         seconds=time.perf_counter() - t_start, time_split=split,
+        simulated=n_simulated, history_s=resolved["history_s"], use_cache=cache_dir is not None,
     )
     run = finish(run, cells_total=len(tasks), cells_computed=n_computed, cells_failed=n_failed,
                  cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,
@@ -652,7 +675,7 @@ def _methods_from(args: argparse.Namespace) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Sequence[str] | None = None) -> SweepSpec:
     """Build the :class:`SweepSpec` of a command line."""
-    from neuspike.simulate import SensorConfig
+    from neuspike.simulation.recording import SensorConfig
 
     weights = weights_dir_from_env(args.weights)
     if weights is not None and not weights.is_dir():

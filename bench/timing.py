@@ -54,7 +54,8 @@ from neuspike.conditions import Condition
 from neuspike.errors import InputError
 from neuspike.parallel import set_threads
 from neuspike.sample import Sample
-from neuspike.simulate import DEFAULT_HISTORY_WINDOWS, SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS, SensorConfig
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Default resolutions (width, height): the paper's Table 2.

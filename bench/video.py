@@ -83,7 +83,7 @@ def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
     from neuspike.conditions import Condition
     from neuspike.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import write_sequence
+    from neuspike.simulation.writing import write_sequence
 
     meta_path = folder / "meta.json"
     scene_spec = SceneSpec(kind="fan", size=(spec.width, spec.height), rpm=spec.rpm)

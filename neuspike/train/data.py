@@ -41,7 +41,8 @@ from neuspike.rng import derive_rng
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec
 from neuspike.scenes.photos import read_photo
-from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.train.spec import KIND_WEIGHTS, TrainSpec
 

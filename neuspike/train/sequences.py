@@ -62,7 +62,8 @@ from neuspike.errors import InputError
 from neuspike.learned import resolve_precision
 from neuspike.rng import derive_rng
 from neuspike.scenes import TEST_PHOTOS, TRAIN_PHOTOS, SceneSpec, make_scene
-from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
 
 __all__ = [
     "DataSpec", "TrainSpec", "Cell", "SequenceItem", "draw_cell", "scene_time", "backward_flow",

@@ -13,7 +13,8 @@ from baselines.firenet import FireNet, FireNetModule
 from neuspike.conditions import Condition
 from neuspike.methods import create, entry
 from neuspike.scenes import SceneSpec
-from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
 from neuspike.weights import save_safetensors
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")

@@ -31,7 +31,7 @@ from neuspike.metrics import ssim
 from neuspike.representations import event_windows
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import simulate_window
+from neuspike.simulation.window import simulate_window
 from neuspike.streams import EventStream
 from tests.shared_data import SHARED
 

@@ -401,7 +401,8 @@ def simulated_window(kind: str, light: float, seed: int) -> np.ndarray:
     """A 128-plane window of the suite's simulator (pan or still photograph, 40x24, random charge)."""
     from neuspike.conditions import Condition, effect
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import SensorConfig, simulate_window
+    from neuspike.simulation.recording import SensorConfig
+    from neuspike.simulation.window import simulate_window
 
     scene = make_scene(SceneSpec(kind=kind, image="camera", size=(40, 24), velocity_px_s=(6000.0, 1600.0)))
     cond = Condition(light=light, motion=32, effects=(effect("initial_charge"),))

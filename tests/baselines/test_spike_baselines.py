@@ -379,7 +379,7 @@ def simulated_window(kind: str, light: float, seed: int) -> np.ndarray:
     """A 256-plane window of the suite's simulator (pan or still photograph, 64x40, random charge)."""
     from neuspike.conditions import Condition, effect
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import simulate_window
+    from neuspike.simulation.window import simulate_window
 
     scene = make_scene(SceneSpec(kind=kind, image="camera", size=(64, 40), velocity_px_s=(3000.0, 800.0)))
     cond = Condition(light=light, motion=64, effects=(effect("initial_charge"),))

@@ -16,7 +16,7 @@ from bench.results import read_csv
 from bench.sweep import Execution, SweepSpec, resolve_methods, run_sweep
 from neuspike import methods as registry
 from neuspike.methods import Method, MethodUnavailable
-from neuspike.simulate import SensorConfig
+from neuspike.simulation.recording import SensorConfig
 
 METHODS = ("tfp-w32", "tfi", "events-integrate", "fusion-complementary")
 PINNED = {

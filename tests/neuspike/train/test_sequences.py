@@ -13,7 +13,8 @@ from neuspike.conditions import Condition
 from neuspike.errors import InputError
 from neuspike.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
 from neuspike.train.sequences import (
     Cell,
     DataSpec,
