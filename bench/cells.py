@@ -134,7 +134,7 @@ class CellResult:
 # ----------------------------------------------------------------------------------------------
 
 _LOADED_PLUGINS: dict[str, Any] = {}
-#: (name, weights folder, device) -> [registry entry, instance, warmed-up flag], per process.
+#: (name, weights folder, device) -> [registry entry, Created, warmed-up flag], per process.
 _INSTANCES: dict[tuple[str, str | None, str], list[Any]] = {}
 
 
@@ -216,15 +216,22 @@ def prepare_worker(setup: WorkerSetup) -> int:
     return int(torch.get_num_threads())
 
 
-def _method(name: str, setup: WorkerSetup) -> list[Any]:
-    """``[entry, instance, warmed]`` of ``name`` in this process (re-created when the entry changed)."""
-    entry = registry.entry(name)
-    key = (name, setup.weights, setup.device)
-    cached = _INSTANCES.get(key)
-    if cached is None or cached[0] is not entry:
-        cached = [entry, registry.create(name, weights_dir=setup.weights, device=setup.device), False]
-        _INSTANCES[key] = cached
-    return cached
+def instances(names: tuple[str, ...] | list[str], setup: WorkerSetup) -> dict[str, list[Any]]:
+    """``{name: [entry, created, warmed]}``: each method built once per process by
+    :func:`neuspike.methods.create_many` (again only when its registry entry changed).
+
+    ``created`` is a :class:`neuspike.methods.Created` (the instance, or why there is none);
+    ``warmed`` says whether the untimed first call ran. Unknown names and an unusable device raise
+    :class:`~neuspike.errors.InputError`.
+    """
+    entries = {name: registry.entry(name) for name in names}
+    key = lambda name: (name, setup.weights, setup.device)  # noqa: E731
+    todo = [n for n in names if key(n) not in _INSTANCES or _INSTANCES[key(n)][0] is not entries[n]]
+    if todo:
+        made = registry.create_many(todo, weights_dir=setup.weights, device=setup.device, keep_errors=True)
+        for name in todo:
+            _INSTANCES[key(name)] = [entries[name], made[name], False]
+    return {name: _INSTANCES[key(name)] for name in names}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -265,7 +272,7 @@ def _stage_summary(meta: dict[str, Any]) -> tuple[list[tuple[str, str]], float, 
 
 
 def _timed_reconstruct(slot: list[Any], sample: Any) -> tuple[np.ndarray, float]:
-    method = slot[1]
+    method = slot[1].method
     if not slot[2]:
         method.reset()
         method.reconstruct(sample)  # untimed first use in this process
@@ -306,23 +313,32 @@ def run_cell(task: CellTask) -> CellResult:
 
     # Resolve the methods first: the simulation is not needed when none can run.
     resolved: dict[str, Any] = {}
-    info: dict[str, dict[str, Any]] = {}
-    for name in task.methods:
-        info[name] = {"method": name}
-        try:
-            entry = registry.entry(name)
-            info[name]["inputs"] = "+".join(sorted(entry.inputs))
-            slot = _method(name, task.setup)
-            method = slot[1]
-            info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()),
-                              method_params=canonical_json(method.describe()))
-            resolved[name] = slot
-        except registry.MethodUnavailable as exc:
-            skipped[name] = one_line(exc)
-            info[name]["skip"] = f"unavailable: {skipped[name]}"
-        except Exception as exc:
+    info: dict[str, dict[str, Any]] = {name: {"method": name} for name in task.methods}
+    try:
+        slots = instances(task.methods, task.setup)
+    except Exception as exc:  # an unknown name or an unusable device (the driver refuses both first)
+        slots = {}
+        for name in task.methods:
             failures[name] = traceback.format_exc()
             info[name]["error"] = f"creating the method failed: {one_line(exc)}"
+    for name, slot in slots.items():
+        entry, created = slot[0], slot[1]
+        info[name]["inputs"] = "+".join(sorted(entry.inputs))
+        if created.unavailable is not None:
+            skipped[name] = one_line(created.unavailable)
+            info[name]["skip"] = f"unavailable: {skipped[name]}"
+        elif created.error is not None:
+            failures[name] = created.traceback
+            info[name]["error"] = f"creating the method failed: {one_line(created.error)}"
+        else:
+            method = created.method
+            try:
+                info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()),
+                                  method_params=canonical_json(method.describe()))
+                resolved[name] = slot
+            except Exception as exc:
+                failures[name] = traceback.format_exc()
+                info[name]["error"] = f"creating the method failed: {one_line(exc)}"
 
     recording = None
     cache_hit = False
@@ -375,7 +391,7 @@ def run_cell(task: CellTask) -> CellResult:
             row.update(status=ERROR, error=meta["error"])
         else:
             slot = resolved[name]
-            method = slot[1]
+            method = slot[1].method
             try:
                 image, ms = _timed_reconstruct(slot, sample)
                 row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")

@@ -3,8 +3,8 @@
 A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method, and writes
 into its output folder:
 
-``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs)
-                    and how it was executed
+``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs,
+                    the device and each learned method's precision) and how it was executed
 ``metadata.json``   provenance (:mod:`bench.provenance`): commit, versions, machine, executor,
                     threads per worker, start and end of each run
 ``parts/<cell>.csv`` one cell's rows, written atomically when the cell finishes
@@ -23,7 +23,8 @@ Resuming
     a kill runs only the cells without a part file, then assembles ``results.csv``, which equals an
     uninterrupted run's in every column except the timing columns
     (:data:`bench.results.TIMING_COLUMNS`), which measure each run anew. A rerun with a different
-    configuration in the same folder is refused (``--force`` replaces the old results; cached
+    configuration in the same folder is refused, another ``--device`` or a precision resolved
+    differently included (``--force`` replaces the old results; cached
     recordings stay valid since their keys hold everything that determines them). Cells whose
     methods failed are kept as results; ``--retry-failed`` runs them again.
 
@@ -44,14 +45,14 @@ import os
 import shutil
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
 import pandas as pd
 
 from bench import grid as grids
-from bench.cells import (CellTask, WorkerSetup, load_plugins, one_line, plugin_names,
+from bench.cells import (CellTask, WorkerSetup, instances, load_plugins, one_line, plugin_names,
                          prepare_worker, run_cell)
 from bench.executors import EXECUTORS, DaskExecutor, make_executor
 from bench.grid import Grid
@@ -148,7 +149,7 @@ class SweepSpec:
 
 @dataclass(frozen=True)
 class Execution:
-    """How a sweep runs (nothing here changes its results, only the timing columns).
+    """How a sweep runs (nothing here changes its results, only the timing columns, except ``device``).
 
     Parameters
     ----------
@@ -169,7 +170,9 @@ class Execution:
     plugins : tuple of str
         Plug-in modules each worker imports (see :func:`bench.cells.load_plugins`).
     device : str
-        Torch device of learned methods (default ``"cpu"``).
+        Torch device of learned methods (default ``"cpu"``). It and the precision each learned
+        method resolves on it change the results, so both are part of the sweep's identity
+        (:func:`arithmetic`); a device no selected method runs on is refused.
     allow_failures, force, retry_failed, progress, report :
         See the command line's help. ``progress=None`` shows the bar only on a terminal.
     """
@@ -256,26 +259,26 @@ class SweepOutcome:
 def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
     """Which methods can run here, what they consume, and the event history they need.
 
-    Every method is created once in this process: unknown names raise :class:`InputError` before
-    anything runs; :class:`~neuspike.methods.MethodUnavailable` marks a method as skipped. The
-    modalities simulated are the union of the inputs of the available methods; the event history
-    is ``history_windows`` window durations when one of them is recurrent, else 0.
+    The methods are built here by :func:`bench.cells.instances`, the same per-process instances the
+    cells of this process use (so each is built once per worker): unknown names and a device that
+    cannot be used raise :class:`InputError` before anything runs; a creation that fails raises;
+    :class:`~neuspike.methods.MethodUnavailable` marks a method as skipped. The modalities simulated
+    are the union of the inputs of the available methods; the event history is ``history_windows``
+    window durations when one of them is recurrent, else 0.
     """
-    from neuspike import methods as registry
-
     prepare_worker(setup)
+    setup = replace(setup, weights=spec.weights)  # the spec's folder decides what is available
     inputs: dict[str, list[str]] = {}
     unavailable: dict[str, str] = {}
     recurrent: list[str] = []
-    for name in spec.methods:
-        entry = registry.entry(name)
-        try:
-            method = registry.create(name, weights_dir=spec.weights, device=setup.device)
-        except registry.MethodUnavailable as exc:
-            unavailable[name] = one_line(exc)
+    for name, (entry, created, _) in instances(spec.methods, setup).items():
+        if created.unavailable is not None:
+            unavailable[name] = one_line(created.unavailable)
             continue
+        if created.error is not None:
+            raise created.error
         inputs[name] = sorted(entry.inputs)
-        if method.recurrent:
+        if created.method.recurrent:
             recurrent.append(name)
     modalities = sorted({m for ins in inputs.values() for m in ins})
     window_s = spec.sensor.planes / spec.sensor.plane_rate_hz
@@ -284,13 +287,61 @@ def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
             "modalities": modalities, "history_s": history_s}
 
 
-def cell_id(spec: SweepSpec, resolved: dict[str, Any], cell: grids.Cell) -> str:
-    """The id of a cell's part file: a hash of the cell and of what the sweep does with it."""
-    return stable_hash({
+#: The device of every sweep folder written before the sweep's identity held its arithmetic.
+LEGACY_DEVICE = "cpu"
+
+
+def arithmetic(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
+    """The device and the precisions the methods compute with: part of the sweep's identity.
+
+    ``{"device": str, "precision": {method: "float32" | "bfloat16"}}``, the precision of each
+    available method that has one (the learned ones, as resolved on this machine for this device).
+    Both change the results, so a resumed sweep must use the same (:func:`_check_config`).
+    """
+    precision = {}
+    for name, (_, created, _) in instances(spec.methods, replace(setup, weights=spec.weights)).items():
+        if created.method is not None and "precision" in created.method.params:
+            precision[name] = str(created.method.params["precision"])
+    return {"device": setup.device.strip().lower(), "precision": precision}
+
+
+def _legacy_arithmetic(out: Path, new: dict[str, Any]) -> dict[str, Any]:
+    """The arithmetic of a folder whose ``config.json`` predates it: the CPU, and each learned
+    method's precision as the folder's rows record it (``method_params``); a method no row
+    records (no finished cell, nothing to mix) keeps the precision ``new`` gives it."""
+    recorded: dict[str, str] = {}
+    for path in sorted((out / "parts").glob("*.csv"))[:1] or [out / "results.csv"]:
+        try:
+            frame = read_csv(path)
+        except (OSError, ValueError):
+            continue
+        for name, text in frame.drop_duplicates("method")[["method", "method_params"]].itertuples(index=False):
+            try:
+                params = json.loads(text).get("params", {}) if isinstance(text, str) and text else {}
+            except (ValueError, AttributeError):
+                params = {}
+            if "precision" in params:
+                recorded[str(name)] = str(params["precision"])
+    return {"device": LEGACY_DEVICE,
+            "precision": {m: recorded.get(m, p) for m, p in new["precision"].items()}}
+
+
+def cell_id(spec: SweepSpec, resolved: dict[str, Any], cell: grids.Cell,
+            arith: dict[str, Any] | None = None) -> str:
+    """The id of a cell's part file: a hash of the cell and of what the sweep does with it.
+
+    ``arith`` (:func:`arithmetic`) enters the hash unless it is the CPU in float32, what every
+    sweep before it ran with, so that the parts of those folders keep their ids.
+    """
+    ident = {
         "harness": HARNESS_VERSION, "cell": cell.identity(), "sensor": spec.sensor.as_dict(),
         "methods": list(spec.methods), "modalities": resolved["modalities"],
         "history_s": resolved["history_s"], "weights": spec.weights,
-    })
+    }
+    if arith is not None and (arith["device"] != LEGACY_DEVICE
+                              or any(p != "float32" for p in arith["precision"].values())):
+        ident["arithmetic"] = arith
+    return stable_hash(ident)
 
 
 def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
@@ -299,7 +350,11 @@ def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
         for key in sorted(set(old) | set(new)):
             out += _diff_paths(old.get(key), new.get(key), f"{path}.{key}" if path else str(key))
         return out
-    return [] if old == new else [path or "(everything)"]
+    if old == new:
+        return []
+    if path.split(".")[0] in ("device", "precision"):  # short values: say what they were and are
+        return [f"{path} {old if old is not None else 'absent'} -> {new if new is not None else 'absent'}"]
+    return [path or "(everything)"]
 
 
 def _check_config(out: Path, sweep_config: dict[str, Any], force: bool) -> bool:
@@ -312,6 +367,8 @@ def _check_config(out: Path, sweep_config: dict[str, Any], force: bool) -> bool:
     except (OSError, ValueError) as exc:
         old = {"unreadable": str(exc)}
     new = json.loads(canonical_json(sweep_config))
+    if isinstance(old, dict) and "device" not in old and "precision" not in old and "device" in new:
+        old = {**old, **_legacy_arithmetic(out, new)}  # written before the identity held them
     if old == new:
         return False
     if not force:
@@ -446,7 +503,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
 
     resolved = resolve_methods(spec, setup)
-    sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved}
+    arith = arithmetic(spec, setup)
+    sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved, **arith}
     stale = _check_config(out, sweep_config, execution.force)
     cache_dir = None
     if execution.use_cache:
@@ -456,7 +514,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     tasks = []
     for cell in cells:
         tasks.append(CellTask(
-            cell_id=cell_id(spec, resolved, cell), cell=cell, sensor=spec.sensor, methods=spec.methods,
+            cell_id=cell_id(spec, resolved, cell, arith), cell=cell, sensor=spec.sensor, methods=spec.methods,
             modalities=tuple(resolved["modalities"]), history_s=resolved["history_s"],
             cache_dir=cache_dir, setup=setup, keep_images=spec.keeps_images(cell),
         ))

@@ -256,18 +256,21 @@ def one_line(exc: BaseException) -> str:
 
 def create_methods(names: Sequence[str], *, weights_dir: str | os.PathLike | None = None,
                    device: str = "cpu") -> dict[str, tuple[Any, str]]:
-    """``{name: (method or None, reason)}``: each method created once; a failure gives ``None`` and
-    ``"skipped: ..."`` (``MethodUnavailable``) or ``"error: ..."`` (anything else)."""
+    """``{name: (method or None, reason)}``: each method created once by
+    :func:`neuspike.methods.create_many`; a method that cannot be created gives ``None`` and
+    ``"skipped: ..."`` (``MethodUnavailable``) or ``"error: ..."`` (anything else). Unknown names and
+    an unusable device raise :class:`~neuspike.errors.InputError` before anything is built."""
     from neuspike import methods as registry
 
+    made = registry.create_many(list(names), weights_dir=weights_dir, device=device, keep_errors=True)
     out: dict[str, tuple[Any, str]] = {}
-    for name in names:
-        try:
-            out[name] = (registry.create(name, weights_dir=weights_dir, device=device), "")
-        except registry.MethodUnavailable as exc:
-            out[name] = (None, f"skipped: {one_line(exc)}")
-        except Exception as exc:  # a method that cannot even be created is a row, not a crash
-            out[name] = (None, f"error: {one_line(exc)}")
+    for name, c in made.items():
+        if c.unavailable is not None:
+            out[name] = (None, f"skipped: {one_line(c.unavailable)}")
+        elif c.error is not None:  # a method that cannot even be created is a row, not a crash
+            out[name] = (None, f"error: {one_line(c.error)}")
+        else:
+            out[name] = (c.method, "")
     return out
 
 
@@ -481,6 +484,9 @@ def run(args: argparse.Namespace) -> Path:
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     names = method_names(args.methods)
+    from neuspike import methods as registry
+
+    registry.check_device(args.device, [registry.entry(n) for n in names])  # before any measurement
     out = Path(args.out or ("runs/timing-full" if args.full else "runs/timing"))
     from neuspike.formats.staging import check_writable_folder
 

@@ -70,6 +70,9 @@ def resolve_device(device: str | torch.device | None) -> torch.device:
         raise InputError(f"device: {device!r} is not a torch device ({exc})") from None
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise InputError(f"device: {device!r} was asked for but this machine has no CUDA device")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise InputError(f"device: {device!r} was asked for but this machine has "
+                         f"{torch.cuda.device_count()} CUDA device(s), numbered from 0")
     if dev.type not in ("cpu", "cuda", "mps", "xpu"):
         raise InputError(f"device: {device!r} is not supported (cpu, cuda, mps or xpu)")
     return dev

@@ -248,3 +248,102 @@ def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: s
     if not isinstance(method, Method):
         raise NeuSpikeError(f"factory of {name!r} returned {type(method).__name__}, not a Method")
     return method
+
+
+@dataclass(frozen=True)
+class Created:
+    """What :func:`create_many` made of one name.
+
+    ``method`` is the instance, or ``None`` when the method cannot run here (``unavailable``: the
+    :class:`MethodUnavailable` raised, e.g. learned weights not given) or creating it failed
+    (``error``: the exception, ``traceback``: its text).
+    """
+
+    name: str
+    method: Method | None = None
+    unavailable: MethodUnavailable | None = None
+    error: BaseException | None = None
+    traceback: str = ""
+
+
+def uses_device(e: MethodEntry) -> bool:
+    """Whether the method of ``e`` runs on a torch device (learned methods; the others ignore ``device``)."""
+    return e.weights is not None
+
+
+def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, ...]") -> None:
+    """Refuse a ``device`` that none of ``entries`` can use, before any method is built.
+
+    A device some learned method will use must exist here (:func:`neuspike.learned.resolve_device`);
+    a device other than ``"cpu"`` when no method runs on a torch device is refused too, since it would
+    be silently ignored.
+
+    Raises
+    ------
+    InputError
+        Naming the device and why it cannot be used.
+    """
+    if not isinstance(device, str) or not device.strip():
+        raise InputError(f"device: expected a torch device name such as 'cpu' or 'cuda', got {device!r}")
+    if any(uses_device(e) for e in entries):
+        from neuspike.learned import resolve_device  # imports torch: only when a method needs it
+
+        resolve_device(device)
+    elif device != "cpu":
+        names = ", ".join(e.name for e in entries)
+        raise InputError(f"device {device!r}: none of the methods ({names}) runs on a torch device, they all run "
+                         "on the CPU; leave the device out")
+
+
+def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.PathLike | None = None,
+                device: str = "cpu", skip_unavailable: bool = True,
+                keep_errors: bool = False) -> dict[str, Created]:
+    """Create each of ``names`` once, the way every front end does (commands, sweeps, timings).
+
+    Every name is looked up and the device checked (:func:`check_device`) before anything is built,
+    so an unknown name or an unusable device costs nothing.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Registered names, without repeats.
+    weights_dir, device :
+        As for :func:`create`.
+    skip_unavailable : bool
+        ``True``: a method that cannot run here (:class:`MethodUnavailable`) is returned with
+        ``unavailable`` set (a sweep's skipped row); ``False``: it raises :class:`MethodUnavailable`
+        naming the method (a command the user asked for it by name).
+    keep_errors : bool
+        ``True``: any other exception raised while creating is returned in ``error`` (a row with an
+        error); ``False``: it propagates.
+
+    Returns
+    -------
+    dict
+        ``{name: Created}`` in the order of ``names``.
+
+    Raises
+    ------
+    InputError
+        An unknown or repeated name, or an unusable device.
+    """
+    names = list(names)
+    if len(set(names)) != len(names):
+        raise InputError(f"methods repeat a name: {names}")
+    entries = [entry(name) for name in names]  # unknown names raise, listing the known ones
+    check_device(device, entries)
+    out: dict[str, Created] = {}
+    for name in names:
+        try:
+            out[name] = Created(name, create(name, weights_dir=weights_dir, device=device))
+        except MethodUnavailable as exc:
+            if not skip_unavailable:
+                raise MethodUnavailable(f"method {name!r} is unavailable: {exc}") from None
+            out[name] = Created(name, unavailable=exc)
+        except Exception as exc:
+            if not keep_errors:
+                raise
+            import traceback
+
+            out[name] = Created(name, error=exc, traceback=traceback.format_exc())
+    return out

@@ -190,7 +190,7 @@ def write_outputs(out: Path, name: str, image: np.ndarray) -> tuple[Path, Path]:
 
 def _prepare_methods(spec: ReconstructSpec) -> list[Any]:
     """Check every requested method against the inputs given and create them (before any work)."""
-    from neuspike.methods import MethodUnavailable, create, entry
+    from neuspike.methods import create_many, entry
 
     _warn_entry_point_problems()
     given = {m for m, path in (("spikes", spec.spikes), ("events", spec.events)) if path is not None}
@@ -204,13 +204,9 @@ def _prepare_methods(spec: ReconstructSpec) -> list[Any]:
             flags = " and ".join(INPUT_FLAGS[m] for m in missing)
             raise InputError(f"method {name!r} needs {flags} (it reads {', '.join(sorted(e.inputs))})")
         entries.append(e)
-    methods = []
-    for e in entries:
-        try:
-            methods.append(create(e.name, weights_dir=spec.weights, device=spec.device))
-        except MethodUnavailable as exc:
-            raise MethodUnavailable(f"method {e.name!r} is unavailable: {exc}") from None
-    return methods
+    made = create_many([e.name for e in entries], weights_dir=spec.weights, device=spec.device,
+                       skip_unavailable=False)
+    return [c.method for c in made.values()]
 
 
 def run(spec: ReconstructSpec, stream: TextIO | None = None) -> list[MethodResult]:

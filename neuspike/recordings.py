@@ -1,36 +1,18 @@
-"""Turn recording files (real or simulated) into a :class:`~neuspike.sample.Sample`.
+"""Turn recording files (real or simulated) into :class:`~neuspike.sample.Sample` s.
 
-:func:`load_sample` reads a spike file (Vidar ``.dat`` or a ``.npz`` with a spike array), an event
-file (anything :func:`neuspike.formats.events_io.read_events` reads: HDF5 in the common or the
-PKU-Vidar-DVS layout, E2VID text, ``.npz``, AEDAT4) or both, picks the key instant and cuts the
-window a method receives. The rules, in order of precedence:
-
-Sensor metadata
-    A ``meta.json`` in the folder of the spike file (else of the event file) is a recording written
-    by ``python -m neuspike.simulate``; its ``width``, ``height``, ``plane_rate_hz``, ``start_s``,
-    ``gain``, ``threshold``, ``event_threshold`` and ``key_time_s`` are used. Explicit arguments
-    override it where they are independent of the file (``gain``, the key instant); a size given
-    explicitly must agree with the one the file or ``meta.json`` states, otherwise an error is raised.
-    Without ``meta.json``: the size comes from the ``.npz`` array or the event file; a bare ``.dat``
-    has no header and needs ``height`` and ``width``; the plane rate, start time and gain stored in
-    an ``.npz`` are used; otherwise the plane rate is the Vidar's :data:`DEFAULT_PLANE_RATE_HZ`, the
-    spike file starts at sensor time 0 and the gain is unknown (``None``) unless given, and methods
-    then apply their documented robust normalisation.
-
-Key instant
-    ``plane=K`` (an index into the spike file; the instant is the centre of plane K) or
-    ``at_s`` (sensor time, in the event file's clock for events-only recordings). Default: the
-    recording's ``key_time_s`` from ``meta.json``, else the middle plane of the spike file (plane
-    ``T // 2``, at its centre), else the centre of the event recording (midway between its first and
-    last event). A key instant chosen by plane is always a plane's centre, never a plane boundary,
-    so that rounding cannot move it into the neighbouring plane.
+A recording is opened once by :func:`neuspike.formats.recording.open_recording` (whose docstring
+gives the rules for its metadata and the default key instant). :func:`stream_samples` cuts the sample
+of each requested instant from it, reading as it goes; :func:`load_sample` is one such cut, at the
+key instant, plus the ground truth. The cut:
 
 Spike window
     ``window_planes`` planes centred on the key plane (planes ``K - N//2 .. K + N//2 - 1`` for even N),
     shifted, not shortened, to stay inside the file; a file no longer than the window is used whole.
     Only that range is read from a ``.dat``. Default N: the file's own length for a simulated window
     recording (``meta.json`` with ``mode`` ``"window"``), else :data:`DEFAULT_WINDOW_PLANES` (256,
-    12.8 ms at 20 kHz, the length of the paper's spike windows).
+    12.8 ms at 20 kHz, the length of the paper's spike windows). A key instant chosen by plane is
+    always a plane's centre, never a plane boundary, so that rounding cannot move it into the
+    neighbouring plane.
 
 Events
     With spikes, the window is the spike window's span; events-only, it lasts ``window_planes`` /
@@ -38,62 +20,62 @@ Events
     simulated window recording's own span) centred on the key instant. The sample carries the events
     with ``t < window_end`` and, as history for recurrent methods, those of the
     :data:`EVENT_HISTORY_S` (1 s) before the window start; earlier events are not loaded into the
-    sample (the sample's ``meta`` records how many were left out).
+    sample (:func:`load_sample`'s ``meta`` records how many were left out). HDF5 event files are read
+    by range, other formats whole; either way with the checks of
+    :func:`neuspike.formats.events_io.read_events`.
 
-Ground truth (for evaluation only)
+Ground truth (for evaluation only; :func:`load_sample`)
     ``gt`` (a ``.png`` or ``.npy`` file) when given. Otherwise ``gt.npy`` (preferred: not quantised)
     or ``gt.png`` beside the recording, used only when the key instant lies in the same plane as the
     recording's ``key_time_s`` (the instant that ground truth shows); a note in ``meta["notes"]``
     says when it was left out. Values above 1 (HDR radiance) are clipped to [0, 1], as the harness
     does, and the number of clipped pixels is noted. 8-bit PNGs are divided by 255, 16-bit by 65535;
     a colour image is accepted only if its channels are equal.
+
+Streaming shares data between neighbouring windows: planes and events already in memory are kept
+while they are still inside the window (or the event history) and only the new ones are read, so
+each plane of a ``.dat`` is read and unpacked once however high the frame rate. What stays in memory
+is the spike window (``window_planes`` planes) and the events of the window plus the history.
 """
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.checks import check_nonnegative, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
+from neuspike.formats.recording import (
+    DEFAULT_PLANE_RATE_HZ,
+    DEFAULT_WINDOW_PLANES,
+    EVENT_HISTORY_S,
+    META_NAME,
+    SPIKE_SUFFIXES,
+    RecordingReader,
+    meta_float,
+    open_recording,
+    plane_of,
+    read_meta,
+    spike_file_extent,
+    window_bounds,
+)
 from neuspike.sample import Sample
-from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
+from neuspike.streams import P_DTYPE, T_DTYPE, XY_DTYPE, EventStream, SpikeStream
 
-#: Spike planes per window when neither the caller nor a simulated recording says otherwise.
-DEFAULT_WINDOW_PLANES = 256
-#: Planes per second assumed for spike files that do not state it (the Vidar's).
-DEFAULT_PLANE_RATE_HZ = VIDAR_PLANE_RATE_HZ
-#: Seconds of event history before the window that a sample carries.
-EVENT_HISTORY_S = 1.0
-#: Suffixes of spike files :func:`load_sample` reads.
-SPIKE_SUFFIXES = (".dat", ".npz")
-META_NAME = "meta.json"
+__all__ = [
+    "DEFAULT_PLANE_RATE_HZ", "DEFAULT_WINDOW_PLANES", "EVENT_HISTORY_S", "GT_NAMES", "SPIKE_SUFFIXES",
+    "RecordingReader", "describe_sample", "load_ground_truth", "load_sample", "meta_float", "open_recording",
+    "read_meta", "spike_file_extent", "stream_samples", "window_bounds",
+]
+
 GT_NAMES = ("gt.npy", "gt.png")
-
-
-def read_meta(folder: str | os.PathLike) -> dict[str, Any] | None:
-    """The ``meta.json`` of a simulated recording folder, or ``None`` when there is none.
-
-    Raises
-    ------
-    FormatError
-        The file exists but is not a JSON object.
-    """
-    path = Path(folder) / META_NAME
-    if not path.is_file():
-        return None
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError) as exc:
-        raise FormatError(f"{path}: not a readable JSON file ({type(exc).__name__}: {exc})") from None
-    if not isinstance(meta, dict):
-        raise FormatError(f"{path}: expected a JSON object, got {type(meta).__name__}")
-    return meta
+#: Events read from the file at a time (about 0.4 MB).
+EVENT_BLOCK = 1 << 15
 
 
 def load_ground_truth(path: str | os.PathLike, *, height: int, width: int) -> tuple[np.ndarray, list[str]]:
@@ -152,67 +134,176 @@ def load_ground_truth(path: str | os.PathLike, *, height: int, width: int) -> tu
     return img.astype(np.float32), notes
 
 
-def _check_file(kind: str, path: str | os.PathLike) -> Path:
-    p = Path(path)
-    if not p.is_file():
-        raise SourceError(f"{kind} file {p}: no such file")
-    return p
+# --------------------------------------------------------------------------- rolling buffers
+class _PlaneBuffer:
+    """Spike planes kept in memory, each read once while windows advance.
+
+    Planes ``[b0, b1)`` live at the start of a buffer that holds ``2 * window_planes`` planes (or
+    the window, if longer); a later window reads only its new planes, into the unused tail. When a
+    window no longer fits, a new buffer is started with the planes still needed (one window's
+    copy per window's worth of progress). A window handed out is a read-only view of planes that
+    are never written again, so the samples already yielded stay valid.
+    """
+
+    def __init__(self, recording: RecordingReader, window_planes: int) -> None:
+        self.rec = recording
+        self.capacity = 2 * window_planes
+        self.buf: np.ndarray | None = None
+        self.b0 = self.b1 = 0
+
+    def get(self, w0: int, w1: int) -> np.ndarray:
+        buf = self.buf
+        if buf is not None and self.b0 <= w0 <= self.b1 and w1 <= self.b0 + buf.shape[0]:
+            if w1 > self.b1:
+                buf[self.b1 - self.b0:w1 - self.b0] = self.rec.read_planes(self.b1, w1)
+                self.b1 = w1
+        else:
+            new = np.empty((max(self.capacity, w1 - w0), self.rec.height, self.rec.width), dtype=np.bool_)
+            filled = w0
+            if buf is not None and self.b0 <= w0 < self.b1:
+                filled = min(self.b1, w0 + new.shape[0])
+                new[:filled - w0] = buf[w0 - self.b0:filled - self.b0]
+            if w1 > filled:
+                new[filled - w0:w1 - w0] = self.rec.read_planes(filled, w1)
+                filled = w1
+            self.buf, self.b0, self.b1 = new, w0, filled
+        view = self.buf[w0 - self.b0:w1 - self.b0]
+        view.flags.writeable = False
+        return view
 
 
-def meta_float(meta: dict[str, Any] | None, key: str) -> float | None:
-    """A finite number from ``meta.json`` (``None`` when absent); anything else is a :class:`FormatError`."""
-    if meta is None or meta.get(key) is None:
-        return None
-    try:
-        v = float(meta[key])
-    except (TypeError, ValueError):
-        raise FormatError(f"meta.json: {key} must be a number, got {meta[key]!r}") from None
-    if not math.isfinite(v):
-        raise FormatError(f"meta.json: {key} must be finite, got {meta[key]!r}")
-    return v
+class _EventBuffer:
+    """The events of the current window and history, read ahead in blocks of the file.
+
+    Events are read in file order, :data:`EVENT_BLOCK` at a time, and appended to the unused tail of
+    the arrays; a window is the slice ``t0 <= t < t1`` of what was read (found by bisection in
+    memory). When an append does not fit, new arrays of twice the needed length are started with
+    the events still needed. Streams handed out are views of events that are never written again,
+    so the samples already yielded stay valid. A window that starts before the previous one, or
+    after everything read, starts afresh by bisection in the file.
+    """
+
+    _FIELDS = (("t_s", T_DTYPE), ("x", XY_DTYPE), ("y", XY_DTYPE), ("p", P_DTYPE))
+
+    def __init__(self, recording: RecordingReader) -> None:
+        self.rec = recording
+        self.t0 = math.inf
+        self._restart(0)
+
+    def _restart(self, file_index: int) -> None:
+        self.arrays = {name: np.empty(0, dtype) for name, dtype in self._FIELDS}
+        self.e0 = self.ea = 0  # events read and kept: arrays[e0:ea]
+        self.ia = file_index  # file index of the first event not read
+
+    def _append(self, new: EventStream) -> None:
+        t = self.arrays["t_s"]
+        if self.ea > self.e0 and len(new) and new.t_s[0] < t[self.ea - 1]:
+            raise FormatError(f"{self.rec.events_path}: timestamps decrease at event {self.ia}")
+        n, kept = len(new), self.ea - self.e0
+        if self.ea + n > t.shape[0]:
+            fresh = {name: np.empty(2 * (kept + n), dtype) for name, dtype in self._FIELDS}
+            for name in fresh:
+                fresh[name][:kept] = self.arrays[name][self.e0:self.ea]
+            self.arrays, self.e0, self.ea = fresh, 0, kept
+        for name, _ in self._FIELDS:
+            self.arrays[name][self.ea:self.ea + n] = getattr(new, name)
+        self.ea += n
+        self.ia += n
+
+    def get(self, t0: float, t1: float) -> EventStream:
+        count = self.rec.event_count
+        if t0 < self.t0:
+            self._restart(self.rec.event_index(t0))
+        self.e0 += int(np.searchsorted(self.arrays["t_s"][self.e0:self.ea], t0, side="left"))
+        if self.e0 == self.ea and self.ia < count and self.rec.event_time(self.ia) < t0:
+            self._restart(self.rec.event_index(t0))  # a jump forward: skip the events in between
+        while self.ia < count and (self.ea == self.e0 or self.arrays["t_s"][self.ea - 1] < t1):
+            self._append(self.rec.read_events(self.ia, min(count, self.ia + EVENT_BLOCK)))
+        e1 = self.e0 + int(np.searchsorted(self.arrays["t_s"][self.e0:self.ea], t1, side="left"))
+        self.t0 = t0
+        v = self.arrays
+        return EventStream.trusted(v["t_s"][self.e0:e1], v["x"][self.e0:e1], v["y"][self.e0:e1], v["p"][self.e0:e1],
+                                   self.rec.width, self.rec.height)
 
 
-def _meta_int(meta: dict[str, Any], key: str) -> int:
-    """A whole number >= 1 from ``meta.json``."""
-    v = meta[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v) or v < 1:
-        raise FormatError(f"meta.json: {key} must be a whole number >= 1, got {v!r}")
-    return int(v)
+# --------------------------------------------------------------------------- streaming
+def _check_times(times_s: Sequence[float] | np.ndarray, recording: RecordingReader) -> np.ndarray:
+    times = np.asarray(times_s, dtype=np.float64).reshape(-1)
+    if times.size and not np.isfinite(times).all():
+        raise InputError("times_s: expected finite times in seconds")
+    if recording.spikes_path is not None and times.size:
+        lo, hi = recording.span_s()
+        bad = (times < lo) | (times > hi)
+        if bad.any():
+            t = float(times[np.argmax(bad)])
+            raise InputError(f"time {t} s is outside the spike recording [{lo}, {hi}] s")
+    return times
 
 
-def _resolve_size(
-    height: int | None, width: int | None, meta: dict[str, Any] | None
-) -> tuple[int | None, int | None]:
-    """The stated size: explicit arguments (both or neither), checked against meta.json's."""
-    if (height is None) != (width is None):
-        raise InputError("give both height and width, or neither")
-    if height is not None:
-        height = check_positive_int("height", height)
-        width = check_positive_int("width", width)
-    if meta is not None and meta.get("height") is not None and meta.get("width") is not None:
-        mh, mw = _meta_int(meta, "height"), _meta_int(meta, "width")
-        if height is not None and (height, width) != (mh, mw):
-            raise InputError(f"size {width}x{height} given, but meta.json states {mw}x{mh}")
-        return mh, mw
-    return height, width
+def stream_samples(
+    recording: RecordingReader,
+    times_s: Sequence[float] | np.ndarray,
+    *,
+    inputs: Iterable[str] | None = None,
+    window_planes: int | None = None,
+    event_history_s: float = EVENT_HISTORY_S,
+) -> Iterator[Sample]:
+    """The :class:`Sample` of each instant (the cut of the module docstring).
 
+    Parameters
+    ----------
+    recording : RecordingReader
+        From :func:`open_recording`.
+    times_s : sequence of float
+        Output instants in sensor seconds; inside the spike file's span when there are spikes.
+        Increasing instants share data between neighbouring windows; any order is correct.
+    inputs : iterable of {"spikes", "events"} or None
+        The modalities to read (default: all the recording has). A modality left out is not read;
+        the windows are cut the same way either way (by the spike window when there are spikes).
+    window_planes : int or None
+        Spike window length in planes (events-only: the window's duration in planes);
+        default :meth:`~neuspike.formats.recording.RecordingReader.default_window_planes`.
+    event_history_s : float
+        Seconds of events before the window carried as history (default
+        :data:`EVENT_HISTORY_S`, as :func:`load_sample`).
 
-def window_bounds(key_plane: int, total_planes: int, window_planes: int) -> tuple[int, int]:
-    """[start, stop) of a window of ``window_planes`` centred on ``key_plane`` inside the file."""
-    if total_planes <= window_planes:
-        return 0, total_planes
-    start = key_plane - window_planes // 2
-    start = min(max(start, 0), total_planes - window_planes)
-    return start, start + window_planes
-
-
-def _is_window_recording(meta: dict[str, Any] | None) -> bool:
-    return (meta is not None and meta.get("mode", "window") == "window" and meta.get("planes") is not None
-            and _meta_int(meta, "planes") > 0)
-
-
-def _plane_of(time_s: float, start_s: float, rate_hz: float) -> int:
-    return int(math.floor((time_s - start_s) * rate_hz + 1e-9))
+    Yields
+    ------
+    Sample
+        Without ground truth. Its arrays are fresh or read-only views that later samples do not
+        modify. ``meta`` names the plane range and the frame index.
+    """
+    want = recording.modalities if inputs is None else frozenset(inputs) & recording.modalities
+    if inputs is not None and frozenset(inputs) - recording.modalities:
+        raise InputError(f"the recording has {sorted(recording.modalities)}, not {sorted(frozenset(inputs) - recording.modalities)}")
+    window_planes = recording.default_window_planes() if window_planes is None else check_positive_int("window_planes", window_planes)
+    history = check_nonnegative("event_history_s", event_history_s)
+    times = _check_times(times_s, recording)
+    rate, total = recording.plane_rate_hz, recording.num_planes
+    planes = _PlaneBuffer(recording, window_planes) if "spikes" in want else None
+    events = _EventBuffer(recording) if "events" in want else None
+    for k, t in enumerate(times):
+        t = float(t)
+        spikes = None
+        info: dict[str, Any] = {"frame": k}
+        if recording.spikes_path is not None:
+            key_plane = min(plane_of(t, recording.start_s, rate), total - 1)
+            w0, w1 = window_bounds(key_plane, total, window_planes)
+            w_start, w_end = recording.start_s + w0 / rate, recording.start_s + w1 / rate
+            info.update(window_planes_in_file=[w0, w1], key_plane_in_file=key_plane, file_planes=total)
+            if planes is not None:
+                block = planes.get(w0, w1)
+                spikes = SpikeStream(block, plane_rate_hz=rate, start_s=w_start, gain=recording.gain,
+                                     threshold=recording.threshold, meta={"source": str(recording.spikes_path)})
+        else:
+            half = window_planes / rate / 2.0
+            w_start, w_end = t - half, t + half
+        ev = events.get(w_start - history, w_end) if events is not None else None
+        yield Sample(
+            height=recording.height, width=recording.width, key_time_s=t, window_start_s=w_start,
+            window_end_s=w_end, spikes=spikes, events=ev, event_threshold=recording.event_threshold,
+            meta=info,
+        )
 
 
 def load_sample(
@@ -229,7 +320,7 @@ def load_sample(
     raw_width: int | None = None,
     plane_rate_hz: float | None = None,
 ) -> Sample:
-    """Load a recording into a :class:`Sample` (rules in the module docstring).
+    """Load one sample of a recording: the cut of :func:`stream_samples` at the key instant.
 
     Parameters
     ----------
@@ -237,22 +328,16 @@ def load_sample(
         Vidar ``.dat`` (needs ``height``/``width`` or a ``meta.json`` beside it) or ``.npz``.
     events : path or None
         An event file.
-    height, width : int or None
-        Sensor size (H, W); required for a bare ``.dat``; must agree with the file's otherwise.
+    height, width, raw_width, plane_rate_hz, gain
+        As for :func:`~neuspike.formats.recording.open_recording`.
     plane : int or None
         Key plane index into the spike file (the key instant is the plane's centre).
     at_s : float or None
         Key instant in sensor seconds. At most one of ``plane`` and ``at_s``.
-    gain : float or None
-        Expected spikes per plane per unit radiance; overrides the recording's (real data: unknown).
     window_planes : int or None
         Spike window length in planes (events-only: the window's duration in planes).
     gt : path or None
         Ground-truth image (``.png`` or ``.npy``); ``None`` looks beside the recording.
-    raw_width : int or None
-        Stored width of a ``.dat`` with extra columns (416-wide captures); the extra columns are dropped.
-    plane_rate_hz : float or None
-        Planes per second; overrides ``meta.json``; default :data:`DEFAULT_PLANE_RATE_HZ`.
 
     Returns
     -------
@@ -271,87 +356,54 @@ def load_sample(
         raise InputError("load_sample: give a spike file, an event file or both")
     if plane is not None and at_s is not None:
         raise InputError("give the key instant as a plane index or as a time, not both")
-    spike_path = _check_file("spike", spikes) if spikes is not None else None
-    event_path = _check_file("event", events) if events is not None else None
-    if spike_path is not None and spike_path.suffix.lower() not in SPIKE_SUFFIXES:
-        raise InputError(
-            f"spike file {spike_path}: expected one of {', '.join(SPIKE_SUFFIXES)}, got {spike_path.suffix or 'no suffix'!r}"
-        )
-    if plane is not None and (isinstance(plane, bool) or not isinstance(plane, (int, np.integer)) or plane < 0):
-        raise InputError(f"plane: expected a plane index >= 0, got {plane!r}")
-    if at_s is not None:
-        at_s = float(at_s)
-        if not math.isfinite(at_s):
-            raise InputError(f"at_s: expected a finite time in seconds, got {at_s!r}")
-    if gain is not None:
-        gain = check_positive("gain", gain)
-        if spike_path is None:
-            raise InputError("a gain applies to spike recordings; no spike file was given")
     if window_planes is not None:
         window_planes = check_positive_int("window_planes", window_planes)
-
-    home = (spike_path or event_path).parent  # type: ignore[union-attr]
-    meta = read_meta(home)
-    height, width = _resolve_size(height, width, meta)
-    # stated by the caller or meta.json; else the spike file's own (an .npz may store it), else the Vidar's
-    rate_given = check_positive("plane_rate_hz", plane_rate_hz) if plane_rate_hz is not None else (
-        meta_float(meta, "plane_rate_hz")
-    )
-    rate = rate_given or DEFAULT_PLANE_RATE_HZ
-    start_given = meta_float(meta, "start_s")
-    file_start_s = start_given or 0.0
-    meta_key_s = meta_float(meta, "key_time_s")
+    with open_recording(spikes=spikes, events=events, height=height, width=width, raw_width=raw_width,
+                        plane_rate_hz=plane_rate_hz, gain=gain) as rec:
+        key_time_s = rec.key_instant(plane=plane, at_s=at_s)
+        sample = next(stream_samples(rec, [key_time_s], window_planes=window_planes))
+        info: dict[str, Any] = {
+            "spikes_path": str(rec.spikes_path) if rec.spikes_path else None,
+            "events_path": str(rec.events_path) if rec.events_path else None,
+            "meta_json": str(rec.folder / META_NAME) if rec.meta is not None else None,
+        }
+        if rec.spikes_path is not None:
+            info.update({k: sample.meta[k] for k in ("file_planes", "window_planes_in_file", "key_plane_in_file")})
+            info.update(gain=rec.gain, gain_source=rec.gain_source)
+        if rec.events_path is not None:
+            info.update({
+                "event_history_s": EVENT_HISTORY_S,
+                "events_left_out_before": rec.event_index(sample.window_start_s - EVENT_HISTORY_S),
+                "events_left_out_after": rec.event_count - rec.event_index(sample.window_end_s),
+            })
     notes: list[str] = []
-    info: dict[str, Any] = {
-        "spikes_path": str(spike_path) if spike_path else None,
-        "events_path": str(event_path) if event_path else None,
-        "meta_json": str(home / META_NAME) if meta is not None else None,
-    }
+    ground_truth, gt_path = _ground_truth(rec, key_time_s, gt, notes)
+    info["ground_truth_path"] = str(gt_path) if gt_path is not None else None
+    info["plane_rate_hz"] = rec.plane_rate_hz
+    info["notes"] = notes
+    return dataclasses.replace(sample, ground_truth=ground_truth, meta=info)
 
-    spike_stream: SpikeStream | None = None
-    if spike_path is not None:
-        spike_stream, key_time_s, rate, file_start_s = _load_spikes(
-            spike_path, height=height, width=width, meta=meta, rate_given=rate_given, start_given=start_given,
-            meta_key_s=meta_key_s, plane=plane, at_s=at_s, window_planes=window_planes,
-            raw_width=raw_width, gain=gain, info=info,
-        )
-        height, width = spike_stream.height, spike_stream.width
-        w_start_s, w_end_s = spike_stream.start_s, spike_stream.end_s
 
-    event_stream: EventStream | None = None
-    if event_path is not None:
-        event_stream = _read_events(event_path, height=height, width=width)
-        if height is None:
-            height, width = event_stream.height, event_stream.width
-        if spike_path is None:
-            key_time_s, w_start_s, w_end_s = _events_only_window(
-                event_stream, meta=meta, rate=rate, file_start_s=file_start_s, meta_key_s=meta_key_s,
-                plane=plane, at_s=at_s, window_planes=window_planes,
-            )
-        n_before = int(np.searchsorted(event_stream.t_s, w_start_s - EVENT_HISTORY_S, side="left"))
-        n_after = len(event_stream) - int(np.searchsorted(event_stream.t_s, w_end_s, side="left"))
-        event_stream = event_stream.between(w_start_s - EVENT_HISTORY_S, w_end_s)
-        info.update({
-            "event_history_s": EVENT_HISTORY_S,
-            "events_left_out_before": n_before,
-            "events_left_out_after": n_after,
-        })
+def _ground_truth(rec: RecordingReader, key_time_s: float, gt: str | os.PathLike | None,
+                  notes: list[str]) -> tuple[np.ndarray | None, Path | None]:
+    """The ground truth of a single cut and its path (rules in the module docstring); notes appended."""
+    from neuspike.metrics import SSIM_WINDOW_SIDE
 
-    ground_truth = None
+    height, width, meta_key_s = rec.height, rec.width, rec.key_time_s
     gt_path: Path | None = Path(gt) if gt is not None else None
     if gt_path is None:
-        beside = [home / n for n in GT_NAMES if (home / n).is_file()]
+        beside = [rec.folder / n for n in GT_NAMES if (rec.folder / n).is_file()]
         if beside:
-            if meta_key_s is not None and _plane_of(key_time_s, file_start_s, rate) == _plane_of(meta_key_s, file_start_s, rate):
+            same = meta_key_s is not None and (plane_of(key_time_s, rec.start_s, rec.plane_rate_hz)
+                                               == plane_of(meta_key_s, rec.start_s, rec.plane_rate_hz))
+            if same:
                 gt_path = beside[0]
             else:
                 notes.append(
                     f"{beside[0].name} beside the recording shows the key time "
                     f"{'(unknown)' if meta_key_s is None else f'{meta_key_s:.6f} s'}, not {key_time_s:.6f} s: not used"
                 )
-    from neuspike.metrics import SSIM_WINDOW_SIDE
-
-    if gt_path is not None and min(height, width) < SSIM_WINDOW_SIDE:  # type: ignore[type-var]
+    if gt_path is not None and min(height, width) < SSIM_WINDOW_SIDE:
         # no SSIM exists below the pinned window: refuse a ground truth asked for, skip one found beside
         if gt is not None:
             raise InputError(
@@ -361,183 +413,11 @@ def load_sample(
         notes.append(f"{gt_path.name} beside the recording not used: {width}x{height} is smaller than the "
                      f"{SSIM_WINDOW_SIDE}x{SSIM_WINDOW_SIDE} SSIM window")
         gt_path = None
-    if gt_path is not None:
-        ground_truth, gt_notes = load_ground_truth(gt_path, height=height, width=width)  # type: ignore[arg-type]
-        notes.extend(gt_notes)
-    info["ground_truth_path"] = str(gt_path) if gt_path is not None else None
-    info["plane_rate_hz"] = rate
-    info["notes"] = notes
-
-    event_threshold = meta_float(meta, "event_threshold")
-    return Sample(
-        height=int(height),  # type: ignore[arg-type]
-        width=int(width),  # type: ignore[arg-type]
-        key_time_s=float(key_time_s),
-        window_start_s=float(w_start_s),
-        window_end_s=float(w_end_s),
-        spikes=spike_stream,
-        events=event_stream,
-        event_threshold=event_threshold,
-        ground_truth=ground_truth,
-        meta=info,
-    )
-
-
-def spike_file_extent(
-    path: Path, *, height: int | None, width: int | None, raw_width: int | None,
-    rate_given: float | None, start_given: float | None,
-) -> tuple[SpikeStream | None, int, float, float]:
-    """A spike file's extent: ``(whole, planes, plane_rate_hz, start_s)``.
-
-    A ``.dat`` has no header: its size must be given, its planes are counted from the file's length
-    (``whole`` is ``None``: nothing is read). An ``.npz`` is read whole (``whole``); a size given
-    must match it. ``rate_given`` / ``start_given`` override the file's (a ``.dat``: 20 kHz from 0 s).
-
-    Raises
-    ------
-    InputError
-        A ``.dat`` without its size, ``raw_width`` for an ``.npz``, a size that does not match.
-    FormatError
-        A file holding no planes.
-    """
-    if path.suffix.lower() == ".dat":
-        if height is None:
-            raise InputError(
-                f"spike file {path}: a .dat file has no header; give its size (--height H --width W), "
-                "e.g. --height 250 --width 400 for a Vidar"
-            )
-        from neuspike.formats.vidar_dat import count_planes
-
-        whole = None
-        total = int(count_planes(path, height=height, width=width, raw_width=raw_width))
-        rate = rate_given or DEFAULT_PLANE_RATE_HZ
-        start_s = start_given or 0.0
-    else:
-        if raw_width is not None:
-            raise InputError("raw_width applies to .dat files only")
-        from neuspike.formats.spike_npz import read_spike_npz
-
-        whole = read_spike_npz(path, plane_rate_hz=rate_given)
-        rate = whole.plane_rate_hz
-        start_s = start_given if start_given is not None else whole.start_s
-        if height is not None and (whole.height, whole.width) != (height, width):
-            raise InputError(
-                f"spike file {path}: holds {whole.width}x{whole.height} planes, but the size given is {width}x{height}"
-            )
-        total = whole.num_planes
-    if total < 1:
-        raise FormatError(f"spike file {path}: holds no planes")
-    return whole, total, rate, start_s
-
-
-def _load_spikes(
-    path: Path, *, height: int | None, width: int | None, meta: dict[str, Any] | None,
-    rate_given: float | None, start_given: float | None, meta_key_s: float | None, plane: int | None,
-    at_s: float | None, window_planes: int | None, raw_width: int | None, gain: float | None,
-    info: dict[str, Any],
-) -> tuple[SpikeStream, float, float, float]:
-    """Read the spike window; return (stream, key_time_s, plane_rate_hz, file_start_s)."""
-    whole, total, rate, file_start_s = spike_file_extent(path, height=height, width=width, raw_width=raw_width,
-                                                         rate_given=rate_given, start_given=start_given)
-    end_s = file_start_s + total / rate
-
-    if plane is not None:
-        if plane >= total:
-            raise InputError(f"plane {plane} is outside the spike file's {total} planes (0..{total - 1})")
-        key_plane, key_time_s = int(plane), file_start_s + (plane + 0.5) / rate
-    elif at_s is not None:
-        if not file_start_s <= at_s <= end_s:
-            raise InputError(f"time {at_s} s is outside the spike recording [{file_start_s}, {end_s}] s")
-        key_plane, key_time_s = min(_plane_of(at_s, file_start_s, rate), total - 1), at_s
-    elif meta_key_s is not None and file_start_s <= meta_key_s <= end_s:
-        key_plane, key_time_s = min(_plane_of(meta_key_s, file_start_s, rate), total - 1), meta_key_s
-    else:
-        key_plane = total // 2
-        key_time_s = file_start_s + (key_plane + 0.5) / rate
-
-    if window_planes is None:
-        window_planes = total if _is_window_recording(meta) else DEFAULT_WINDOW_PLANES
-    w0, w1 = window_bounds(key_plane, total, window_planes)
-    if whole is None:
-        from neuspike.formats.vidar_dat import read_dat
-
-        planes = read_dat(path, height=height, width=width, start=w0, stop=w1, raw_width=raw_width)
-        stream_meta: dict[str, Any] = {"source": str(path)}
-        file_gain = None
-        threshold = None
-    else:
-        planes = whole.planes[w0:w1]
-        stream_meta = dict(whole.meta)
-        file_gain = whole.gain
-        threshold = whole.threshold
-
-    meta_gain = meta_float(meta, "gain")
-    if gain is not None:
-        used_gain, gain_source = gain, "given"
-    elif meta_gain is not None:
-        used_gain, gain_source = meta_gain, "meta.json"
-    elif file_gain is not None:
-        used_gain, gain_source = file_gain, "file"
-    else:
-        used_gain, gain_source = None, "unknown"
-    threshold = meta_float(meta, "threshold") if meta_float(meta, "threshold") is not None else threshold
-
-    stream = SpikeStream(
-        planes, plane_rate_hz=rate, start_s=file_start_s + w0 / rate, gain=used_gain,
-        threshold=threshold, meta=stream_meta,
-    )
-    info.update({
-        "file_planes": total,
-        "window_planes_in_file": [w0, w1],
-        "key_plane_in_file": key_plane,
-        "gain": used_gain,
-        "gain_source": gain_source,
-    })
-    return stream, key_time_s, rate, file_start_s
-
-
-def _read_events(path: Path, *, height: int | None, width: int | None) -> EventStream:
-    from neuspike.formats.events_io import read_events
-
-    kwargs = {} if height is None else {"width": width, "height": height}
-    stream = read_events(path, **kwargs)
-    if height is not None and (stream.height, stream.width) != (height, width):
-        raise InputError(
-            f"event file {path}: sensor size {stream.width}x{stream.height} does not match {width}x{height}"
-        )
-    return stream
-
-
-def _events_only_window(
-    events: EventStream, *, meta: dict[str, Any] | None, rate: float, file_start_s: float,
-    meta_key_s: float | None, plane: int | None, at_s: float | None, window_planes: int | None,
-) -> tuple[float, float, float]:
-    """(key_time_s, window_start_s, window_end_s) for a recording without spikes."""
-    if window_planes is None:
-        window_planes = int(meta["planes"]) if _is_window_recording(meta) else DEFAULT_WINDOW_PLANES  # type: ignore[index]
-    duration_s = window_planes / rate
-    have = len(events) > 0
-    first, last = (float(events.t_s[0]), float(events.t_s[-1])) if have else (None, None)
-    if plane is not None:
-        if meta is None:
-            raise InputError(
-                "a plane index needs a spike clock; for an event recording give the key instant "
-                "with --at SECONDS (sensor time)"
-            )
-        if _is_window_recording(meta) and plane >= int(meta["planes"]):  # type: ignore[index]
-            raise InputError(f"plane {plane} is outside the recording's {int(meta['planes'])} planes")  # type: ignore[index]
-        key_s = file_start_s + (plane + 0.5) / rate
-    elif at_s is not None:
-        if meta is None and have and not first <= at_s <= last:  # type: ignore[operator]
-            raise InputError(f"time {at_s} s is outside the event recording [{first}, {last}] s")
-        key_s = at_s
-    elif meta_key_s is not None:
-        key_s = meta_key_s
-    elif have:
-        key_s = 0.5 * (first + last)  # type: ignore[operator]
-    else:
-        raise InputError("the event file holds no events; give the key instant with --at SECONDS")
-    return key_s, key_s - duration_s / 2.0, key_s + duration_s / 2.0
+    if gt_path is None:
+        return None, None
+    image, gt_notes = load_ground_truth(gt_path, height=height, width=width)
+    notes.extend(gt_notes)
+    return image, gt_path
 
 
 def describe_sample(sample: Sample) -> str:

@@ -164,7 +164,7 @@ def spec_from_args(args: argparse.Namespace) -> VideoSpec:
 
 
 def _create_methods(spec: VideoSpec, modalities: frozenset[str]) -> list[Any]:
-    from neuspike.methods import MethodUnavailable, create, entry, load_entry_points
+    from neuspike.methods import create_many, entry, load_entry_points
 
     for problem in load_entry_points():
         print(f"warning: {problem}", file=sys.stderr)
@@ -178,13 +178,9 @@ def _create_methods(spec: VideoSpec, modalities: frozenset[str]) -> list[Any]:
             raise InputError(f"method {name!r} needs {' and '.join(missing)}, which the recording lacks "
                              f"(it has {', '.join(sorted(modalities))})")
         entries.append(e)
-    methods = []
-    for e in entries:
-        try:
-            methods.append(create(e.name, weights_dir=spec.weights, device=spec.device))
-        except MethodUnavailable as exc:
-            raise MethodUnavailable(f"method {e.name!r} is unavailable: {exc}") from None
-    return methods
+    made = create_many([e.name for e in entries], weights_dir=spec.weights, device=spec.device,
+                       skip_unavailable=False)
+    return [c.method for c in made.values()]
 
 
 def _range(spec: VideoSpec, span: tuple[float, float]) -> tuple[float, float]:
