@@ -1,9 +1,11 @@
-"""Training data: cells drawn from (seed, split, index), simulated through the core's sample builder.
+"""Single-window training data (:class:`~neuspike.train.spec.WindowData`): cells drawn from (seed,
+split, index), simulated through the core's sample builder, and the batches, loss and validation of
+a feed-forward network trained on them (:class:`WindowTask`).
 
 A cell is a scene (a training photograph panning in any direction, zooming, behind a fan, or still;
 or a procedural dead-leaves scene with independently moving layers) and a condition (L
-log-uniform over ``spec.light_range``, S from ``spec.motions``, a noise level from
-``spec.noise_levels``, plus the sweeps' default effects: random initial charge and the clean
+log-uniform over ``data.light_range``, S from ``data.motions``, a noise level from
+``data.noise_levels``, plus the sweeps' default effects: random initial charge and the clean
 event-camera preset). Everything about cell ``index`` of ``split`` comes from
 ``derive_rng(seed, "train-cell", split, index)``, and the window is simulated by
 :func:`neuspike.simulate.simulate_sample`, so the same seed gives the same bytes.
@@ -28,24 +30,26 @@ import json
 import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
 import torch
 
+from neuspike import atomic
 from neuspike.atomic import write_bytes
 from neuspike.conditions import EVENT_PRESETS, Condition, effect
-from neuspike.errors import FormatError
+from neuspike.errors import FormatError, InputError
 from neuspike.rng import derive_rng
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec
 from neuspike.scenes.photos import read_photo
 from neuspike.simulate import SensorConfig, simulate_sample
 from neuspike.streams import EventStream, SpikeStream
-from neuspike.train.spec import KIND_WEIGHTS, TrainSpec
+from neuspike.train.spec import KIND_WEIGHTS, TrainSpec, WindowData, spec_from_dict
 
-__all__ = ["augment", "build_shard", "draw_cell", "load_sample", "save_sample", "shard_paths", "simulate_cell"]
+__all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
+           "shard_paths", "simulate_cell"]
 
 #: Effects every training cell declares (the sweeps' defaults).
 BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
@@ -53,15 +57,16 @@ SENSOR_SIZE = (400, 250)
 
 
 def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int) -> str:
-    name = spec.photos[int(rng.integers(len(spec.photos)))]
+    data: WindowData = spec.data
+    name = data.photos[int(rng.integers(len(data.photos)))]
     luma = read_photo(name)
     h, w = luma.shape
     scale = max(SENSOR_SIZE[0] / w, SENSOR_SIZE[1] / h) * float(np.exp(rng.uniform(np.log(0.3), np.log(1.2))))
-    side = min(int(round(spec.view / scale)), h, w)
+    side = min(int(round(data.view / scale)), h, w)
     y0, x0 = int(rng.integers(0, h - side + 1)), int(rng.integers(0, w - side + 1))
     region = luma[y0:y0 + side, x0:x0 + side]
-    interp = cv2.INTER_AREA if side > spec.view else cv2.INTER_LINEAR
-    region = np.clip(cv2.resize(region, (spec.view, spec.view), interpolation=interp), 0.0, 1.0).astype(np.float32)
+    interp = cv2.INTER_AREA if side > data.view else cv2.INTER_LINEAR
+    region = np.clip(cv2.resize(region, (data.view, data.view), interpolation=interp), 0.0, 1.0).astype(np.float32)
     path = source_dir / f"{split}-{index:06d}-{name}.npy"
     if not path.exists():
         buf = io.BytesIO()
@@ -73,18 +78,19 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
 def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.PathLike
               ) -> tuple[SceneSpec, Condition, int, dict[str, Any]]:
     """The (scene, condition, simulation seed) of cell ``index`` of ``split``, and a description."""
+    data: WindowData = spec.data
     rng = derive_rng(spec.seed, "train-cell", split, int(index))
     kinds = list(KIND_WEIGHTS)
     kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
-    size = (spec.view, spec.view)
+    size = (data.view, data.view)
     angle = rng.uniform(0, 2 * np.pi)
-    speed = float(np.exp(rng.uniform(np.log(100.0), np.log(4000.0)))) * spec.view / SENSOR_SIZE[0]
+    speed = float(np.exp(rng.uniform(np.log(100.0), np.log(4000.0)))) * data.view / SENSOR_SIZE[0]
     velocity = (speed * np.cos(angle), speed * np.sin(angle))
     if kind == "dead_leaves":
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
     else:
         image = _photo_source(spec, rng, Path(source_dir), split, index)
-        focus = (float(rng.uniform(0.2, 0.8) * spec.view), float(rng.uniform(0.2, 0.8) * spec.view))
+        focus = (float(rng.uniform(0.2, 0.8) * data.view), float(rng.uniform(0.2, 0.8) * data.view))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
         elif kind == "zoom":
@@ -98,10 +104,10 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
                               blade_contrast=float(rng.uniform(0.0, 2.0)))
         else:
             scene = SceneSpec(kind="still", image=image, size=size)
-    lo, hi = spec.light_range
+    lo, hi = data.light_range
     light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
-    motion = int(spec.motions[int(rng.integers(len(spec.motions)))])
-    noise = spec.noise_levels[int(rng.integers(len(spec.noise_levels)))]
+    motion = int(data.motions[int(rng.integers(len(data.motions)))])
+    noise = data.noise_levels[int(rng.integers(len(data.noise_levels)))]
     condition = Condition(light=light, motion=motion, noise=noise, effects=BASE_EFFECTS)
     sim_seed = int(rng.integers(2**31))
     info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
@@ -157,7 +163,7 @@ def shard_paths(shard_dir: str | os.PathLike, split: str, count: int) -> list[Pa
 def _make_one(args: tuple[dict[str, Any], str, int, str, str]) -> str:
     spec_dict, split, index, source_dir, path = args
     torch.set_num_threads(1)
-    spec = TrainSpec(**spec_dict)
+    spec = spec_from_dict(spec_dict)
     save_sample(path, simulate_cell(spec, split, index, source_dir))
     return path
 
@@ -173,13 +179,13 @@ def build_shard(spec: TrainSpec, shard_dir: str | os.PathLike, split: str, count
     if progress:
         progress(count - len(todo))
     if todo:
-        if spec.workers == 1:
+        if spec.data.workers == 1:
             for job in todo:
                 _make_one(job)
                 if progress:
                     progress(1)
         else:
-            with ProcessPoolExecutor(spec.workers) as pool:
+            with ProcessPoolExecutor(spec.data.workers) as pool:
                 for _ in pool.map(_make_one, todo, chunksize=4):
                     if progress:
                         progress(1)
@@ -201,3 +207,163 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
         if k:
             out = [torch.rot90(t, k, dims=(-2, -1)) for t in out]
     return [t.contiguous() for t in out]
+
+
+#: Module tensors only the fusion network has (left out of the spike-only export).
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.")
+
+
+def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    mse = ((pred - target) ** 2).mean(dim=(1, 2, 3)).clamp_min(1e-10)
+    return 10.0 * torch.log10(1.0 / mse)
+
+
+class WindowTask:
+    """Batches, loss and validation of a feed-forward network on single windows.
+
+    * **order**: step ``k`` uses the windows ``perm_e[j]`` of epoch ``e`` (a permutation drawn from
+      ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``.
+    * **inputs**: the method's own :meth:`~neuspike.learned.LearnedMethod.encode` (one step), the
+      target the sample's ground truth (1, 1, H, W).
+    * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
+    * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
+      ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
+      the motion path silenced, so the same weights also train the spike-only variant, validated and
+      exported as ``<name>-spike``.
+    * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
+      the best PSNR exports.
+    """
+
+    score_key = "val_psnr"
+
+    def __init__(self, spec: TrainSpec, method) -> None:
+        import kornia
+
+        self.spec = spec
+        self.data: WindowData = spec.data
+        self.method = method
+        self.module = method.module
+        self.fusion = method.params.get("spike_only") is False
+        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0)
+
+    # -- data --------------------------------------------------------------------------------------
+
+    def shard_folders(self) -> list[Path]:
+        root = Path(self.data.shard_dir)
+        return [root, root / "train", root / "val", root / "sources"]
+
+    def prepare(self, bar_factory: Callable[..., Any]) -> None:
+        spec, data = self.spec, self.data
+        shard = Path(data.shard_dir)
+        shard.mkdir(parents=True, exist_ok=True)
+        key_path = shard / "data_key.json"
+        key = data.key(spec.seed)
+        if key_path.exists():
+            have = json.loads(key_path.read_text())
+            if have != key:
+                raise InputError(f"{shard}: holds windows of another data spec {have}; use another shard folder")
+        else:
+            atomic.write_json(key_path, key)
+        bar = bar_factory(total=data.val_items + data.train_items, desc="simulating windows", unit="win")
+        self.val_paths = build_shard(spec, shard, "val", data.val_items, progress=bar.update)
+        self.train_paths = build_shard(spec, shard, "train", data.train_items, progress=bar.update)
+        bar.close()
+
+    def load_validation(self) -> None:
+        samples = [load_sample(p) for p in self.val_paths]
+        inputs = [self.encode(s) for s in samples]
+        stacked = [torch.cat([x[k] for x in inputs]) for k in range(len(inputs[0]))]
+        target = torch.stack([torch.from_numpy(s.ground_truth)[None] for s in samples])
+        self.val_batch = (stacked, target)
+
+    def encode(self, sample: Sample) -> tuple[torch.Tensor, ...]:
+        return tuple(self.method.encode(sample)[0])
+
+    def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """The inputs and targets of ``step`` (deterministic from the seed and the step)."""
+        spec = self.spec
+        n = len(self.train_paths)
+        first = step * spec.batch
+        idx = []
+        for j in range(first, first + spec.batch):
+            epoch, pos = divmod(j, n)
+            perm = derive_rng(spec.seed, "order", epoch).permutation(n)
+            idx.append(int(perm[pos]))
+        rng = derive_rng(spec.seed, "augment", step)
+        inputs, targets = [], []
+        for i in idx:
+            sample = load_sample(self.train_paths[i])
+            x = [t[0] for t in self.encode(sample)]
+            y = torch.from_numpy(sample.ground_truth)[None]
+            *x, y = augment([*x, y], rng, spec.crop)
+            inputs.append(x)
+            targets.append(y)
+        return [torch.stack([x[k] for x in inputs]) for k in range(len(inputs[0]))], torch.stack(targets)
+
+    # -- model -------------------------------------------------------------------------------------
+
+    def variants(self) -> list[str]:
+        """The variants this run validates and exports."""
+        return ["fusion", "spike"] if self.fusion else ["single"]
+
+    def step_variant(self, step: int) -> str:
+        if not self.fusion:
+            return "single"
+        spike = derive_rng(self.spec.seed, "modality", step).random() < self.data.spike_only_fraction
+        return "spike" if spike else "fusion"
+
+    def forward(self, inputs: Sequence[torch.Tensor], variant: str) -> torch.Tensor:
+        if variant == "spike":
+            return self.module.forward_texture_only(inputs[0])
+        return self.module(*inputs)
+
+    def loss(self, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+        pred = pred.float()
+        l1 = (pred - target).abs().mean()
+        ssim = self.ssim_loss(pred, target)
+        loss = l1 + self.data.ssim_weight * ssim
+        return loss, {"l1": l1.item(), "ssim_loss": ssim.item()}
+
+    def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
+        """The loss of step ``step`` (its batch, variant and forward pass) and what the log records."""
+        import time
+
+        variant = self.step_variant(step)
+        t0 = time.perf_counter()
+        inputs, target = self.batch(step)
+        t_data = time.perf_counter() - t0
+        with autocast():
+            pred = self.forward(inputs, variant)
+        loss, parts = self.loss(pred, target)
+        return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
+
+    @torch.no_grad()
+    def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:
+        import kornia
+
+        self.module.eval()
+        inputs, target = self.val_batch
+        preds = []
+        for i in range(0, target.shape[0], 8):
+            with autocast():
+                preds.append(self.forward([x[i:i + 8] for x in inputs], variant).float())
+        pred = torch.cat(preds).clamp(0, 1)
+        ssim = kornia.metrics.ssim(pred, target, window_size=11, max_val=1.0).mean(dim=(1, 2, 3))
+        self.module.train()
+        return {"val_l1": float((pred - target).abs().mean()), "val_psnr": float(_psnr(pred, target).mean()),
+                "val_ssim": float(ssim.mean())}
+
+    def exported(self, variant: str, name: str) -> tuple[str, dict[str, torch.Tensor], dict[str, Any]]:
+        """``(method name, tensors, parameters)`` of the weights ``variant`` exports."""
+        params = dict(self.method.params)
+        state = self.module.state_dict()
+        if variant == "spike":
+            state = {k: v for k, v in state.items() if not k.startswith(MOTION_PREFIXES)}
+            params["spike_only"] = True
+            name = f"{name}-spike"
+        return name, state, params
+
+    def describe_data(self) -> dict[str, Any]:
+        return {"simulator": "neuspike.simulate.simulate_sample", "kind": "windows",
+                "train_items": self.data.train_items, "val_items": self.data.val_items,
+                "photos": list(self.data.photos), "procedural": "dead_leaves"}
