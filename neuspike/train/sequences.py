@@ -51,7 +51,7 @@ from neuspike.train.spec import LIGHTS, MOTIONS, SequenceData, TrainSpec
 
 __all__ = [
     "Cell", "SequenceItem", "SequenceTask", "build_shard", "draw_cell", "load_shard", "make_batch",
-    "run_sequence", "sequence_loss", "simulate_item", "warp",
+    "run_sequence", "sequence_loss", "simulate_item", "validate_sequences", "warp",
 ]
 
 
@@ -296,6 +296,32 @@ def run_sequence(module: torch.nn.Module, voxels: torch.Tensor, *, precision: st
     return outputs
 
 
+def validate_sequences(module: torch.nn.Module, shard: dict[str, np.ndarray], data: SequenceData, *,
+                       precision: str) -> dict[str, float]:
+    """Mean L1 and SSIM (:func:`neuspike.metrics.ssim`, data range 1) of ``module`` over the items of
+    ``shard`` (:func:`load_shard`), on the steps after ``data.warmup_windows`` and on the last step.
+
+    Leaves ``module`` in eval mode.
+    """
+    from neuspike.metrics import ssim as ssim_metric
+
+    module.eval()
+    l1s, ssims, last = [], [], []
+    with torch.no_grad():
+        for i in range(shard["voxels"].shape[0]):
+            vox = torch.from_numpy(shard["voxels"][i].astype(np.float32))[:, None]
+            outs = run_sequence(module, vox, precision=precision)
+            for k in range(data.warmup_windows, len(outs)):
+                o = outs[k][0, 0].float().clamp(0, 1).numpy()
+                y = shard["targets"][i, k, 0].astype(np.float32)
+                l1s.append(float(np.abs(o - y).mean()))
+                s = float(ssim_metric(o, y, data_range=1.0))
+                ssims.append(s)
+                if k == len(outs) - 1:
+                    last.append(s)
+    return {"val_l1": float(np.mean(l1s)), "val_ssim": float(np.mean(ssims)), "val_ssim_last": float(np.mean(last))}
+
+
 class SequenceTask:
     """Batches, loss and validation of a recurrent network on sequences (module docstring).
 
@@ -348,27 +374,9 @@ class SequenceTask:
         return loss, {**parts, "variant": "main"}
 
     def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:
-        """Mean L1 and SSIM over the validation items, on the steps after the warm-up and on the last step."""
-        from neuspike.metrics import ssim as ssim_metric
-
-        shard = self.val_shard
-        self.module.eval()
-        l1s, ssims, last = [], [], []
-        with torch.no_grad():
-            for i in range(shard["voxels"].shape[0]):
-                vox = torch.from_numpy(shard["voxels"][i].astype(np.float32))[:, None]
-                outs = run_sequence(self.module, vox, precision=self.precision)
-                for k in range(self.data.warmup_windows, len(outs)):
-                    o = outs[k][0, 0].float().clamp(0, 1).numpy()
-                    y = shard["targets"][i, k, 0].astype(np.float32)
-                    l1s.append(float(np.abs(o - y).mean()))
-                    s = float(ssim_metric(o, y, data_range=1.0))
-                    ssims.append(s)
-                    if k == len(outs) - 1:
-                        last.append(s)
+        scores = validate_sequences(self.module, self.val_shard, self.data, precision=self.precision)
         self.module.train()
-        return {"val_l1": float(np.mean(l1s)), "val_ssim": float(np.mean(ssims)),
-                "val_ssim_last": float(np.mean(last))}
+        return scores
 
     def exported(self, variant: str, name: str) -> tuple[str, dict[str, torch.Tensor], dict[str, Any]]:
         return name, self.module.state_dict(), dict(self.method.params)

@@ -26,7 +26,7 @@ from neuspike.errors import InputError
 
 __all__ = [
     "DATA_KINDS", "KIND_WEIGHTS", "KINDS", "LIGHTS", "MOTIONS", "NOISE_LEVELS", "SEQUENCE_KINDS",
-    "SequenceData", "TrainSpec", "WindowData", "learning_rate", "load_spec", "spec_from_dict",
+    "SequenceData", "TrainSpec", "WindowData", "learning_rate", "load_spec", "spec_from_dict", "with_out_dir",
 ]
 
 #: Scene kinds drawn for single windows and their probabilities (``dead_leaves`` is procedural).
