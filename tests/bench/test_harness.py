@@ -19,7 +19,8 @@ from bench import grid as grids
 from neuspike.simulation.cache import load_recording, save_recording
 from bench.cells import METRICS, forget_plugin, load_plugins
 from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
-from bench.sweep import ConfigMismatch, Execution, SweepSpec, main, run_sweep
+from bench.harness import ConfigMismatch, Execution, SweepSpec, run_sweep
+from bench.sweep import main
 from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.simulation.recording import SensorConfig
@@ -305,7 +306,7 @@ def test_cache_round_trip_is_bit_exact(tmp_path):
 DRIVER = textwrap.dedent('''
     import sys
     from bench import grid as grids
-    from bench.sweep import Execution, SweepSpec, run_sweep
+    from bench.harness import Execution, SweepSpec, run_sweep
     from neuspike.simulation.recording import SensorConfig
 
     plugin, out = sys.argv[1], sys.argv[2]

@@ -10,7 +10,8 @@ import pytest
 from bench import cells
 from bench import grid as grids
 from bench.results import read_csv
-from bench.sweep import ConfigMismatch, Execution, SweepSpec, cell_id, main, resolve_methods, run_sweep
+from bench.harness import ConfigMismatch, Execution, SweepSpec, cell_id, resolve_methods, run_sweep
+from bench.sweep import main
 from bench.cells import WorkerSetup
 from neuspike import methods as registry
 from neuspike.errors import InputError

@@ -11,7 +11,7 @@ import neuspike.simulation.cell as cell_module
 from bench import grid as grids
 from bench.cells import forget_plugin, load_plugins
 from bench.results import read_csv
-from bench.sweep import Execution, SweepSpec, run_sweep
+from bench.harness import Execution, SweepSpec, run_sweep
 from neuspike import methods as registry
 from neuspike.conditions import Condition
 from neuspike.scenes import SceneSpec
