@@ -12,7 +12,7 @@ into its output folder:
 ``results.csv``     every row (:mod:`bench.results`), assembled from the parts, sorted
 ``errors/<cell>.txt`` tracebacks of the failures of a cell, when any
 ``images/``         reconstructions and ground truth for the report's figure grid, in the layout
-                    of :mod:`bench.report` (``images/<scene>/<axis>=<value>/<method>.png``): for the
+                    of :mod:`bench.reporting` (``images/<scene>/<axis>=<value>/<method>.png``): for the
                     swept axis, of the first seed with the other axes at their first value
 ``cache/``          simulated recordings (:mod:`neuspike.simulation.cache`), unless ``--cache`` points elsewhere:
                     one file per modality, so a method added to a finished sweep simulates nothing
@@ -439,10 +439,10 @@ def _remove_stale_temporaries(out: Path) -> None:
 
 
 def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[str, Any]) -> None:
-    """Write a cell's images in :mod:`bench.report`'s layout (nothing when that module is absent)."""
-    if importlib.util.find_spec("bench.report") is None:
+    """Write a cell's images in :mod:`bench.reporting`'s layout (nothing when that module is absent)."""
+    if importlib.util.find_spec("bench.reporting") is None:
         return
-    from bench.report import image_path, write_image_png
+    from bench.reporting import image_path, write_image_png
 
     value = getattr(cell.condition, axis)
     for name, image in images.items():
@@ -450,15 +450,15 @@ def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[st
 
 
 def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]:
-    """Call ``bench.report.build_report(out)`` when that module exists.
+    """Call ``bench.reporting.build_report(out)`` when that module exists.
 
     Returns ``(pdf_path, note, failed)``: a note instead of a path when the module is not installed
     or the report failed.
     """
-    if importlib.util.find_spec("bench.report") is None:
-        return None, "report: bench.report is not available here; results.csv holds every number", False
+    if importlib.util.find_spec("bench.reporting") is None:
+        return None, "report: bench.reporting is not available here; results.csv holds every number", False
     try:
-        from bench.report import build_report
+        from bench.reporting import build_report
 
         return Path(build_report(out)), None, False
     except Exception as exc:

@@ -170,7 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"merged {merged['method'].nunique()} methods over "
           f"{len(merged.drop_duplicates(list(CELL_KEY)))} cells into {args.out}/results.csv")
     if not args.no_report:
-        from bench.report import build_report
+        from bench.reporting import build_report
 
         print(f"report: {build_report(Path(args.out))}")
     return 0

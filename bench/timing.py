@@ -22,7 +22,7 @@ Outputs in ``--out`` (default ``runs/timing``; ``runs/timing-full`` with ``--ful
     ``config.json``, ``metadata.json``; with sweep results (``--results``): ``accuracy_vs_time.csv``
     (each method's mean PSNR and SSIM from the sweep beside its ms per frame here, at the sweep's
     resolution when it was timed, else at the timed resolution closest in pixel count) and
-    ``figures/accuracy_vs_time.png``; and ``report.pdf`` (:func:`bench.report.build_report`).
+    ``figures/accuracy_vs_time.png``; and ``report.pdf`` (:func:`bench.reporting.build_report`).
 
 ``--results`` defaults to the newest (by the time ``results.csv`` was written) of ``runs/light``,
 ``runs/light-full``, ``runs/motion``, ``runs/motion-full``, ``runs/noise``, ``runs/noise-full``
@@ -471,7 +471,7 @@ def run(args: argparse.Namespace) -> Path:
 
     from neuspike.atomic import write_json, write_text
     from bench.provenance import command_line, machine, now_iso, package_versions, source_state
-    from bench.report import write_timing_tables
+    from bench.reporting import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)
     if weights is not None and not weights.is_dir():
@@ -495,7 +495,7 @@ def run(args: argparse.Namespace) -> Path:
     results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
     results = None
     if results_dir is not None:
-        from bench.report import read_results
+        from bench.reporting import read_results
 
         if not (results_dir / "results.csv").is_file():
             raise InputError(f"--results: {results_dir} holds no results.csv")
@@ -536,7 +536,7 @@ def run(args: argparse.Namespace) -> Path:
     elif acc_path.exists():
         acc_path.unlink()  # a chart from an earlier run would not match these timings
     if not args.no_report:
-        from bench.report import build_report
+        from bench.reporting import build_report
 
         print(f"report: {build_report(out)}")
     return out

@@ -386,7 +386,7 @@ def test_dask_missing_gives_a_clear_error(monkeypatch):
 
 
 def test_reconstructions_of_the_swept_axis_are_saved_for_the_report(plugin, tmp_path):
-    report = pytest.importorskip("bench.report")
+    report = pytest.importorskip("bench.reporting")
     import matplotlib.image as mpimg
 
     spec = SweepSpec(name="tiny", grid=tiny_grid(seeds=(0, 1)), methods=("ht-mean", "ht-fail"),

@@ -13,7 +13,7 @@ import pytest
 
 from bench import claims as cl
 from bench import figures as figs
-from bench import report
+from bench import report, reporting
 from bench import tables as tb
 from bench.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
@@ -91,11 +91,11 @@ def built(tmp_path_factory):
     (d / "metadata.json").write_text('{"source": {"commit": "abc", "dirty": false}, "machine": {"cpu_model": "x"}}\n')
     truth = np.random.default_rng(0).random((24, 40))
     for light in LIGHTS:
-        report.write_image_png(report.image_path(d / "images", "pan:camera", "light", light, "gt"), truth)
+        reporting.write_image_png(reporting.image_path(d / "images", "pan:camera", "light", light, "gt"), truth)
         for method in ("tfp-w8", "tfi"):
-            report.write_image_png(report.image_path(d / "images", "pan:camera", "light", light, method),
+            reporting.write_image_png(reporting.image_path(d / "images", "pan:camera", "light", light, method),
                                    truth * light * 2)
-    return d, report.build_report(d), truth
+    return d, reporting.build_report(d), truth
 
 
 def table_bytes(folder: Path) -> dict[str, bytes]:
@@ -168,7 +168,7 @@ def test_a_rerun_removes_a_killed_reports_temporaries_and_an_unwritable_out_is_o
 
 def test_report_refuses_a_folder_without_results(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothing to report"):
-        report.build_report(tmp_path)
+        reporting.build_report(tmp_path)
     assert report.main([str(tmp_path)]) == 2
 
 
@@ -195,14 +195,14 @@ def test_noise_table_puts_the_paper_beside_ours():
 def test_image_convention_round_trip(built):
     d, _, truth = built
     images = d / "images"
-    path = report.image_path(images, "pan:camera", "light", 1 / 32, "tfi")
+    path = reporting.image_path(images, "pan:camera", "light", 1 / 32, "tfi")
     assert path == images / "pan_camera" / "light=0.03125" / "tfi.png"
-    loaded = report.load_images(images, synthetic_results(), "light")
+    loaded = reporting.load_images(images, synthetic_results(), "light")
     assert set(loaded) == {"pan:camera"}
     np.testing.assert_allclose(loaded["pan:camera"][("gt", 1 / 32)], np.round(truth * 255) / 255, atol=1e-6)
     np.testing.assert_allclose(loaded["pan:camera"][("tfi", 0.5)], np.round(truth * 255) / 255, atol=1e-6)
     with pytest.raises(ValueError):
-        report.write_image_png(d / "bad.png", truth + 1.0)  # out of range is refused, never clipped
+        reporting.write_image_png(d / "bad.png", truth + 1.0)  # out of range is refused, never clipped
     assert not (d / "bad.png").exists()
 
 

@@ -213,7 +213,7 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
         assert (out / name).stat().st_size > 0
     # the report rebuilds Table 2 from timing.csv alone, byte for byte
     before = {n: (out / "tables" / n).read_bytes() for n in ("timing.md", "timing.csv", "accuracy_vs_time.md")}
-    from bench.report import build_report
+    from bench.reporting import build_report
 
     build_report(out)
     assert {n: (out / "tables" / n).read_bytes() for n in before} == before
