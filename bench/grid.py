@@ -74,6 +74,10 @@ FULL_SEEDS = (0, 1)
 PAN_SPEED_PX_S_AT_400 = 1000.0
 
 
+#: The paper's Table 2 resolutions (width, height).
+TABLE2_RESOLUTIONS: tuple[tuple[int, int], ...] = ((240, 180), (346, 260), (400, 250), (640, 480))
+
+
 @dataclass(frozen=True)
 class SceneEntry:
     """A named scene of a grid: ``name`` (``KIND:IMAGE``) and its :class:`~neuspike.scenes.SceneSpec`."""

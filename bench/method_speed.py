@@ -1,10 +1,10 @@
 """Milliseconds per reconstructed frame of every method at 400x250: ``python -m bench.method_speed``.
 
 Every registered method (or ``--methods``) reconstructs from one representative recording at the
-Vidar size, 400x250 (:func:`bench.timing.representative_sample`: the ``camera`` photograph panning,
+Vidar size, 400x250 (:func:`bench.timer.representative_sample`: the ``camera`` photograph panning,
 L = 1/4, S = 128, a 256-plane window, events with one window of history): ``--warmup`` untimed calls,
 then the median and spread of ``--repeats`` timed calls, each after ``reset()``
-(:func:`bench.timing.time_method`, the same code as Table 2).
+(:func:`bench.timer.time_method`, the same code as Table 2).
 
 Columns
     ``T=256``    ms per call on the full 256-plane window (the sweeps' window)
@@ -51,7 +51,7 @@ import numpy as np
 import pandas as pd
 
 from bench import tables as tb
-from bench import timing
+from bench import timer
 from neuspike.errors import InputError
 from neuspike.parallel import set_threads
 
@@ -126,7 +126,7 @@ def tfp_reference_row(window: int) -> str:
 
 
 def _time_row(name: str, fn: Callable[[], Any], column: str, *, repeats: int, warmup: int) -> dict[str, Any]:
-    stats = timing.time_callable(fn, repeats=repeats, warmup=warmup).summary()
+    stats = timer.time_callable(fn, repeats=repeats, warmup=warmup).summary()
     return {"method": name, "family": "reference", "status": "ok", "error": "",
             f"{column}_median": stats["median_ms"], f"{column}_min": stats["min_ms"], f"{column}_max": stats["max_ms"]}
 
@@ -184,7 +184,7 @@ def thread_counts() -> dict[str, int]:
 
 def pin_threads(threads: int) -> dict[str, int]:
     """Set torch's intra-op pool and numba's pool to ``threads`` (numba: at most its launch count)."""
-    set_threads(timing.check_count("threads", threads, 1))
+    set_threads(timer.check_count("threads", threads, 1))
     return thread_counts()
 
 
@@ -253,18 +253,18 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
             log=None) -> pd.DataFrame:
     """One row per method and per same-run reference: ms on the 256-plane and (spike methods) 41-plane
     windows, per step, threads, load, and the verdict of the method's target."""
-    created = timing.create_methods(names, weights_dir=weights_dir, device=device)
+    created = timer.create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for method, _ in created.values() if method is not None for m in method.inputs}
     if "snm" in names or "tfstp" in names:
         needs.add("spikes")
-    sample = timing.representative_sample(WIDTH, HEIGHT, modalities=sorted(needs)) if needs else None
-    short = timing.cut_spike_window(sample, REFERENCE_PLANES) if sample is not None and sample.spikes is not None else None
+    sample = timer.representative_sample(WIDTH, HEIGHT, modalities=sorted(needs)) if needs else None
+    short = timer.cut_spike_window(sample, REFERENCE_PLANES) if sample is not None and sample.spikes is not None else None
     threads = thread_counts()
     load_before = load_average()
     rows = []
     for name in names:
         method, reason = created[name]
-        info = timing.method_info(name, method)
+        info = timer.method_info(name, method)
         row: dict[str, Any] = {"method": name, "family": info["family"], "parameters": info["parameters"],
                                "status": "ok", "error": ""}
         if method is None:
@@ -272,18 +272,18 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
             row.update(status=status, error=msg)
         else:
             try:
-                full = timing.time_method(method, sample, repeats=repeats, warmup=warmup).row()
+                full = timer.time_method(method, sample, repeats=repeats, warmup=warmup).row()
                 row.update(ms_256_median=full["median_ms"], ms_256_min=full["min_ms"], ms_256_max=full["max_ms"])
                 if not math.isnan(full["steps"]):
                     row.update(steps=full["steps"], ms_step_median=full["ms_per_frame"],
                                ms_step_min=full["min_frame_ms"], ms_step_max=full["max_frame_ms"])
                 if info["family"] == "spike" and short is not None:
-                    cut = timing.time_method(method, short, repeats=repeats, warmup=warmup).row()
+                    cut = timer.time_method(method, short, repeats=repeats, warmup=warmup).row()
                     row.update(ms_41_median=cut["median_ms"], ms_41_min=cut["min_ms"], ms_41_max=cut["max_ms"])
                     if _TFP.covers(name):
                         row["window_41"] = tfp_window_planes(method, short.spikes.num_planes)
             except Exception as exc:  # a failing method is a row
-                row.update(status="error", error=timing.one_line(exc))
+                row.update(status="error", error=timer.one_line(exc))
         if log:
             log(f"{name}: " + (_spread(row, "ms_256") + " ms" if row["status"] == "ok" else f"{row['status']} ({row['error']})"))
         rows.append(row)
@@ -370,8 +370,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         weights = weights_dir_from_env(args.weights)
         if weights is not None and not weights.is_dir():
             raise InputError(f"weights folder {str(weights)!r} is not a folder")
-        pin_threads(timing.check_count("--threads", args.threads, 1) if args.threads is not None else _usable_cpus())
-        names = timing.method_names(args.methods)
+        pin_threads(timer.check_count("--threads", args.threads, 1) if args.threads is not None else _usable_cpus())
+        names = timer.method_names(args.methods)
         frame = measure(names, repeats=args.repeats, warmup=args.warmup, weights_dir=weights,
                         log=lambda s: print(s, file=sys.stderr, flush=True))
     except InputError as exc:

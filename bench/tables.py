@@ -518,7 +518,6 @@ def accuracy_markdown(points: pd.DataFrame, note: str = "") -> str:
 # ----------------------------------------------------------------------------------------------
 
 #: The resolutions of the paper's Table 2, (width, height).
-TABLE2_RESOLUTIONS: tuple[tuple[int, int], ...] = ((240, 180), (346, 260), (400, 250), (640, 480))
 #: Table 2 of the paper (NeuSpike-Net, ICCV 2021), ms per frame: "WxH" -> {(method, device): ms}.
 PAPER_TABLE2: Mapping[str, Mapping[tuple[str, str], float]] = {
     "240x180": {("E2VID", "GPU"): 6.15, ("FireNet", "GPU"): 2.21, ("NeuSpike-Net", "GPU"): 10.31,

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import method_speed, timing
+from bench import method_speed, timer, timing
 from bench import tables as tb
 from bench.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
@@ -37,7 +37,7 @@ def test_time_callable_on_a_fake_timer():
     for ms in (5, 1, 3, 9, 7):
         ticks += [t, t + ms * 1_000_000]
         t += 50_000_000
-    stats = timing.time_callable(lambda: calls.append(1), repeats=5, warmup=2, setup=lambda: setups.append(1),
+    stats = timer.time_callable(lambda: calls.append(1), repeats=5, warmup=2, setup=lambda: setups.append(1),
                                  timer=fake_timer(ticks))
     assert stats.samples_ms == (5.0, 1.0, 3.0, 9.0, 7.0)
     assert len(calls) == 7 and len(setups) == 7  # warm-up calls are made, set up, and not timed
@@ -47,20 +47,20 @@ def test_time_callable_on_a_fake_timer():
 
 
 def test_summary_of_an_even_count_interpolates():
-    s = timing.summarize_ms([4.0, 1.0, 2.0, 3.0])
+    s = timer.summarize_ms([4.0, 1.0, 2.0, 3.0])
     assert s["median_ms"] == 2.5 and s["q1_ms"] == 1.75 and s["q3_ms"] == 3.25
 
 
 @pytest.mark.parametrize("bad", [[], [1.0, -0.5], [float("nan")]])
 def test_summary_rejects_bad_timings(bad):
     with pytest.raises(InputError):
-        timing.summarize_ms(bad)
+        timer.summarize_ms(bad)
 
 
 @pytest.mark.parametrize("kw", [{"repeats": 0, "warmup": 0}, {"repeats": 2, "warmup": -1}, {"repeats": 1.5, "warmup": 0}])
 def test_time_callable_rejects_bad_counts(kw):
     with pytest.raises(InputError):
-        timing.time_callable(lambda: None, **kw)
+        timer.time_callable(lambda: None, **kw)
 
 
 class FakeRecurrent:
@@ -84,7 +84,7 @@ class FakeRecurrent:
 def test_time_method_divides_recurrent_calls_by_their_steps():
     method = FakeRecurrent()
     ticks = [0, 8_000_000, 10_000_000, 22_000_000, 30_000_000, 40_000_000]  # 8, 12, 10 ms
-    result = timing.time_method(method, "sample", repeats=3, warmup=1, timer=fake_timer(ticks))
+    result = timer.time_method(method, "sample", repeats=3, warmup=1, timer=fake_timer(ticks))
     assert method.resets == 4 and result.steps == 4
     row = result.row()
     assert row["median_ms"] == 10.0 and row["ms_per_frame"] == 2.5
@@ -101,12 +101,12 @@ def test_cut_spike_window_keeps_the_planes_around_the_key_plane():
     spikes = SpikeStream(planes, plane_rate_hz=100.0, start_s=0.0, gain=0.5, threshold=1.0)
     sample = Sample(height=3, width=4, key_time_s=0.05, window_start_s=0.0, window_end_s=0.1, spikes=spikes)
     assert sample.key_plane == 5
-    cut = timing.cut_spike_window(sample, 4)
+    cut = timer.cut_spike_window(sample, 4)
     np.testing.assert_array_equal(cut.spikes.planes, planes[3:7])
     assert cut.spikes.start_s == pytest.approx(0.03) and cut.window_end_s == pytest.approx(0.07)
     assert cut.key_plane == 2 and cut.spikes.gain == 0.5
     with pytest.raises(InputError):
-        timing.cut_spike_window(sample, 12)
+        timer.cut_spike_window(sample, 12)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -151,8 +151,8 @@ def test_methods():
 
 
 def test_measure_gives_a_row_per_method_and_size(test_methods):
-    frame = timing.measure(test_methods, [(32, 24), (16, 12)], repeats=2, warmup=1, history_windows=0.0)
-    assert list(frame.columns) == list(timing.TIMING_COLUMNS) and len(frame) == 6
+    frame = timer.measure(test_methods, [(32, 24), (16, 12)], repeats=2, warmup=1, history_windows=0.0)
+    assert list(frame.columns) == list(timer.TIMING_COLUMNS) and len(frame) == 6
     by = frame.set_index(["method", "resolution"])
     ok = by.loc[("tt-mean", "32x24")]
     assert ok["status"] == "ok" and ok["repeats"] == 2 and ok["min_ms"] <= ok["median_ms"] <= ok["max_ms"]
@@ -184,7 +184,7 @@ def test_join_accuracy_takes_the_sweeps_resolution_or_the_closest():
         {"method": "b", "resolution": "640x480", "width": 640, "height": 480, "status": "ok", "ms_per_frame": 30.0},
         {"method": "c", "resolution": "32x24", "width": 32, "height": 24, "status": "skipped", "ms_per_frame": math.nan},
     ])
-    joined = timing.join_accuracy(results_for({"a": 20.0, "b": 25.0, "c": 10.0}), timing_rows, "runs/x").set_index("method")
+    joined = timer.join_accuracy(results_for({"a": 20.0, "b": 25.0, "c": 10.0}), timing_rows, "runs/x").set_index("method")
     assert joined.loc["a", "ms_per_frame"] == 1.0 and joined.loc["a", "resolution"] == "32x24"
     assert joined.loc["b", "ms_per_frame"] == 3.0 and joined.loc["b", "resolution"] == "240x180"
     assert math.isnan(joined.loc["c", "ms_per_frame"]) and joined.loc["b", "psnr"] == 25.0
@@ -204,7 +204,7 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
     acc = pd.read_csv(out / "accuracy_vs_time.csv")
     assert acc["method"].tolist() == ["tt-mean"] and acc["psnr"].iloc[0] == 20.0
     # times are paired with accuracy at the sweep's own resolution, timed in addition to --sizes
-    sweep_w, sweep_h = timing.sweep_resolution(results_for({"tt-mean": 20.0}))
+    sweep_w, sweep_h = timer.sweep_resolution(results_for({"tt-mean": 20.0}))
     assert acc["resolution"].iloc[0] == f"{sweep_w}x{sweep_h}"
     assert {"32x24", f"{sweep_w}x{sweep_h}"} <= set(frame["resolution"])
     assert set(json.loads((out / "metadata.json").read_text())["load_1min"]) == {"before", "after"}
