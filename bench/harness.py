@@ -55,7 +55,7 @@ from bench import grid as grids
 from bench.cells import CellTask, WorkerSetup, instances, one_line, plugin_names, prepare_worker, run_cell
 from bench.executors import DaskExecutor, make_executor
 from bench.grid import Grid
-from bench.provenance import collect, finish, now_iso
+from bench.provenance import collect, finish, now_iso, portable_path
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError
@@ -139,7 +139,9 @@ class SweepSpec:
             "methods": list(self.methods),
             "sensor": self.sensor.as_dict(),
             "history_windows": self.history_windows,
-            "weights": self.weights,
+            # as the folder's config records it: no absolute path of this machine (the cells' ids hold
+            # the resolved folder)
+            "weights": portable_path(self.weights) if self.weights is not None else None,
             "axis": self.axis,
         }
 
@@ -532,7 +534,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
             path.unlink()
 
     execution_config = {
-        **executor.describe(), "threads_per_worker": threads, "cache_dir": cache_dir,
+        **executor.describe(), "threads_per_worker": threads,
+        "cache_dir": portable_path(cache_dir) if cache_dir is not None else None,
         "plugins": list(plugins), "allow_failures": execution.allow_failures,
     }
     write_json(out / "config.json", {"sweep": sweep_config, "execution": execution_config})

@@ -42,3 +42,16 @@ def test_a_script_run_by_path_is_named_without_its_folder(monkeypatch):
 
     monkeypatch.setitem(sys.modules, "__main__", types.SimpleNamespace(__spec__=None))
     assert command_line(["/abs/path/to/script.py", "--x", "1"]) == ["python", "script.py", "--x", "1"]
+
+
+def test_a_sweeps_config_names_its_weights_folder_without_the_machines_path(tmp_path, monkeypatch):
+    from bench import grid as grids
+    from bench.harness import SweepSpec
+
+    (tmp_path / "repo").mkdir()
+    (tmp_path / "shared" / "weights").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path / "repo")
+    spec = SweepSpec(name="light", grid=grids.preset("light", full=False), methods=("tfp",),
+                     weights=str(tmp_path / "shared" / "weights"), axis="light")
+    assert os.path.isabs(spec.weights)  # the cells' identity keeps the resolved folder
+    assert spec.as_dict()["weights"] == os.path.join("..", "shared", "weights")
