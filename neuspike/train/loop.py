@@ -31,7 +31,10 @@ from neuspike.errors import InputError
 from neuspike.train import checkpoint as ck
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 
-__all__ = ["Trainer", "train", "training_method"]
+__all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
+
+#: A shard's temporaries older than this are a killed run's (one item is written in well under a second).
+STALE_SHARD_S = 600.0
 
 
 def training_method(spec: TrainSpec):
@@ -181,8 +184,8 @@ class Trainer:
             torch.set_num_threads(spec.threads)
         ck.remove_temporaries(self.out)
         ck.check_spec(spec)
-        for folder in self.task.shard_folders():
-            ck.remove_temporaries(folder)
+        for folder in self.task.shard_folders():  # shared with other runs: only writes long dead
+            ck.remove_temporaries(folder, older_than_s=STALE_SHARD_S)
         self.task.prepare(self._bar)
         if simulate_only:
             return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}

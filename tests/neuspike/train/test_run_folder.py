@@ -184,6 +184,16 @@ def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights
     assert "9.0" not in {r["loss"] for r in rows}
 
 
+def test_temporaries_of_a_shared_folder_go_only_when_long_dead(tmp_path):
+    dead, live, kept = tmp_path / ".000001.npz.ab.tmp", tmp_path / ".000002.npz.cd.tmp", tmp_path / "000000.npz"
+    for p in (dead, live, kept):
+        p.write_bytes(b"x")
+    os.utime(dead, (time.time() - 3600, time.time() - 3600))
+    assert ck.remove_temporaries(tmp_path, older_than_s=600) == [dead]
+    assert live.exists() and kept.exists() and not dead.exists()
+    assert ck.remove_temporaries(tmp_path) == [live] and kept.exists()
+
+
 def test_an_unknown_checkpoint_is_a_format_error(tmp_path):
     with pytest.raises(FormatError, match="not a training checkpoint"):
         ck.upgrade_checkpoint({"weights": 1}, score_key="val_psnr", variants=["single"])
