@@ -82,6 +82,21 @@ def test_old_spec_files_are_the_runs_the_new_command_makes():
     assert spec_from_dict(json.loads(json.dumps(old.as_dict()))) == old
 
 
+def test_the_shipped_cards_specs_read_as_specs_of_this_trainer():
+    """The specs inside the shipped weights' cards (both earlier trainers' forms) are runs of this one."""
+    from neuspike.weights import PACKAGE_WEIGHTS
+
+    kinds = {}
+    for card in sorted(PACKAGE_WEIGHTS.glob("*.json")):
+        data = json.loads(card.read_text())
+        raw = data["spec"] if "spec" in data else data["training"]["spec"]
+        spec = spec_from_dict(raw, where=card.name, out_dir="runs/x")
+        assert spec.method == data["method"].removesuffix("-spike")
+        kinds[card.stem] = spec.kind
+    assert kinds == {"e2vid": "sequences", "firenet-sim": "sequences", "neuspike-net": "windows",
+                     "neuspike-net-spike": "windows"}
+
+
 def _tiny_windows(tmp_path, out: str) -> TrainSpec:
     data = WindowData(shard_dir=str(tmp_path / "shard"), view=16, train_items=3, val_items=2, workers=1)
     return TrainSpec(data=data, out_dir=str(tmp_path / out), steps=4, batch=2, crop=16, val_every=2,
