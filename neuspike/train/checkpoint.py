@@ -46,12 +46,20 @@ LOG_COLUMNS = ("step", "kind", "variant", "loss", "l1", "ssim_loss", "temporal",
 _VAL_COLUMNS = ("val_l1", "val_psnr", "val_ssim", "val_ssim_last")
 
 
-def remove_temporaries(folder: str | os.PathLike) -> list[Path]:
-    """Remove the temporaries (``.<name>.*.tmp``) an atomic write killed midway left in ``folder``; return them."""
+def remove_temporaries(folder: str | os.PathLike, *, older_than_s: float | None = None) -> list[Path]:
+    """Remove the temporaries (``.<name>.*.tmp``) an atomic write killed midway left in ``folder``; return them.
+
+    ``older_than_s``: only those not modified for that long (a folder other runs may be writing into
+    at the same time, such as a shared shard, keeps the temporaries of writes in progress).
+    """
+    import time
+
     folder = Path(folder)
     if not folder.is_dir():
         return []
-    stale = [p for p in folder.glob(".*.tmp") if p.is_file()]
+    now = time.time()
+    stale = [p for p in folder.glob(".*.tmp")
+             if p.is_file() and (older_than_s is None or now - p.stat().st_mtime > older_than_s)]
     for p in stale:
         p.unlink(missing_ok=True)
     return stale

@@ -31,7 +31,10 @@ from neuspike.errors import InputError
 from neuspike.train import checkpoint as ck
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 
-__all__ = ["Trainer", "train", "training_method"]
+__all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
+
+#: A shard's temporaries older than this are a killed run's (one item is written in well under a second).
+STALE_SHARD_S = 600.0
 
 
 def training_method(spec: TrainSpec):
@@ -141,6 +144,7 @@ class Trainer:
 
     def export(self, variant: str, scores: dict[str, float], folders: list[Path]) -> None:
         name, state, params = self.task.exported(variant, self.spec.method)
+        params = {k: v for k, v in params.items() if k not in ("weights_file", "precision")}  # not the design
         card = ck.make_card(self.spec, name=name, model_class=type(self.method).__name__, params=params,
                             step=self.step, precision=self.precision, wall_s=self.wall_s, scores=scores,
                             data=self.task.describe_data())
@@ -180,8 +184,8 @@ class Trainer:
             torch.set_num_threads(spec.threads)
         ck.remove_temporaries(self.out)
         ck.check_spec(spec)
-        for folder in self.task.shard_folders():
-            ck.remove_temporaries(folder)
+        for folder in self.task.shard_folders():  # shared with other runs: only writes long dead
+            ck.remove_temporaries(folder, older_than_s=STALE_SHARD_S)
         self.task.prepare(self._bar)
         if simulate_only:
             return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}

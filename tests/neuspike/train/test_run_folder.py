@@ -82,6 +82,21 @@ def test_old_spec_files_are_the_runs_the_new_command_makes():
     assert spec_from_dict(json.loads(json.dumps(old.as_dict()))) == old
 
 
+def test_the_shipped_cards_specs_read_as_specs_of_this_trainer():
+    """The specs inside the shipped weights' cards (both earlier trainers' forms) are runs of this one."""
+    from neuspike.weights import PACKAGE_WEIGHTS
+
+    kinds = {}
+    for card in sorted(PACKAGE_WEIGHTS.glob("*.json")):
+        data = json.loads(card.read_text())
+        raw = data["spec"] if "spec" in data else data["training"]["spec"]
+        spec = spec_from_dict(raw, where=card.name, out_dir="runs/x")
+        assert spec.method == data["method"].removesuffix("-spike")
+        kinds[card.stem] = spec.kind
+    assert kinds == {"e2vid": "sequences", "firenet-sim": "sequences", "neuspike-net": "windows",
+                     "neuspike-net-spike": "windows"}
+
+
 def _tiny_windows(tmp_path, out: str) -> TrainSpec:
     data = WindowData(shard_dir=str(tmp_path / "shard"), view=16, train_items=3, val_items=2, workers=1)
     return TrainSpec(data=data, out_dir=str(tmp_path / out), steps=4, batch=2, crop=16, val_every=2,
@@ -182,6 +197,16 @@ def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights
     train_steps = [int(r["step"]) for r in rows if r["kind"] == "train"]
     assert train_steps == [1, 2, 3, 4]
     assert "9.0" not in {r["loss"] for r in rows}
+
+
+def test_temporaries_of_a_shared_folder_go_only_when_long_dead(tmp_path):
+    dead, live, kept = tmp_path / ".000001.npz.ab.tmp", tmp_path / ".000002.npz.cd.tmp", tmp_path / "000000.npz"
+    for p in (dead, live, kept):
+        p.write_bytes(b"x")
+    os.utime(dead, (time.time() - 3600, time.time() - 3600))
+    assert ck.remove_temporaries(tmp_path, older_than_s=600) == [dead]
+    assert live.exists() and kept.exists() and not dead.exists()
+    assert ck.remove_temporaries(tmp_path) == [live] and kept.exists()
 
 
 def test_an_unknown_checkpoint_is_a_format_error(tmp_path):
