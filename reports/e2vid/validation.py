@@ -25,15 +25,9 @@ sys.path.insert(0, str(here.parents[1]))
 
 from neuspike.checks import parse_size  # noqa: E402
 from neuspike.methods import create  # noqa: E402
-from neuspike.train.sequences import (  # noqa: E402
-    PRESETS,
-    DataSpec,
-    TrainSpec,
-    build_shard,
-    load_shard,
-    training_method,
-    validate,
-)
+from neuspike.train.loop import training_method  # noqa: E402
+from neuspike.train.sequences import build_shard, load_shard, validate_sequences  # noqa: E402
+from neuspike.train.spec import SequenceData, TrainSpec  # noqa: E402
 
 METHODS = ("e2vid", "firenet-sim", "firenet")
 
@@ -47,10 +41,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     view = None if args.view is None else parse_size(args.view)
-    spec = TrainSpec(method="e2vid", data=DataSpec(view=view),
-                     **{**PRESETS["e2vid"], "length": 8, "val_items": args.items})
-    paths = build_shard(training_method("e2vid"), spec.data, seed=spec.seed, split="val", count=args.items,
-                        folder=args.shards / spec.data.key(), progress=False)
+    data = SequenceData(view=view, length=8, val_items=args.items)
+    spec = TrainSpec(method="e2vid", data=data, crop=48)
+    paths = build_shard(training_method(spec), data, seed=spec.seed, split="val", count=args.items,
+                        folder=args.shards / data.key())
     shard = load_shard(paths)
     rows = []
     for name in METHODS:
@@ -59,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         method = create(name, weights_dir=args.weights)
         module = method.module.float()
-        scores = validate(module, shard, spec)
+        scores = validate_sequences(module, shard, data, precision="float32")
         rows.append({"method": name, "sequences": len(paths), "view": args.view or "128x128", **scores,
                      "weights": str(method.weights_path.name)})
         print(f"{name}: val SSIM {scores['val_ssim']:.4f} (last step {scores['val_ssim_last']:.4f}), "
