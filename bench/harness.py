@@ -55,11 +55,11 @@ from bench import grid as grids
 from bench.cells import CellTask, WorkerSetup, instances, one_line, plugin_names, prepare_worker, run_cell
 from bench.executors import DaskExecutor, make_executor
 from bench.grid import Grid
-from bench.provenance import collect, finish, now_iso, portable_path
+from bench.provenance import collect, finish, now_iso
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError
-from neuspike.jsonio import canonical_json, stable_hash
+from neuspike.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).

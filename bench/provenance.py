@@ -21,6 +21,8 @@ from importlib import metadata as _metadata
 from pathlib import Path
 from typing import Any
 
+from neuspike.jsonio import portable_path
+
 #: Distributions whose versions are recorded (absent ones are recorded as ``None``).
 PACKAGES = (
     "neuspike-bench", "numpy", "torch", "kornia", "scikit-image", "scipy", "opencv-contrib-python-headless",
@@ -91,20 +93,6 @@ def machine() -> dict[str, Any]:
         "usable_cpus": usable,
         "memory_bytes": _memory_bytes(),
     }
-
-
-def portable_path(path: str | os.PathLike) -> str:
-    """``path`` as it can be written into a committed report: relative to the current folder where
-    it lies inside it or beside it (``../shared/weights``), else ``.../`` and its last two parts
-    (no absolute path of the machine that made the report)."""
-    text = os.fspath(path)
-    if not os.path.isabs(text):
-        return text
-    rel = os.path.relpath(text, Path.cwd())
-    if not rel.startswith(os.pardir + os.sep + os.pardir) and rel != os.pardir + os.sep + os.pardir:
-        return rel
-    parts = Path(text).parts
-    return os.path.join("...", *parts[-2:])
 
 
 def command_line(argv: list[str] | None = None) -> list[str]:

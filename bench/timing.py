@@ -126,7 +126,8 @@ def run(args: argparse.Namespace) -> Path:
     from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
     from neuspike.atomic import write_json, write_text
-    from bench.provenance import command_line, machine, now_iso, package_versions, portable_path, source_state
+    from bench.provenance import command_line, machine, now_iso, package_versions, source_state
+    from neuspike.jsonio import portable_path
     from bench.reporting import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)

@@ -9,11 +9,12 @@ import dataclasses
 import hashlib
 import json
 import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["canonical_json", "json_default", "stable_hash"]
+__all__ = ["canonical_json", "json_default", "portable_path", "stable_hash"]
 
 
 def json_default(value: Any) -> Any:
@@ -40,3 +41,17 @@ def canonical_json(obj: Any) -> str:
 def stable_hash(obj: Any, length: int = 20) -> str:
     """Hex SHA-256 of :func:`canonical_json` of ``obj``, cut to ``length`` characters."""
     return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:length]
+
+
+def portable_path(path: str | os.PathLike) -> str:
+    """``path`` as it can be written into a committed report: relative to the current folder where
+    it lies inside it or beside it (``../shared/weights``), else ``.../`` and its last two parts
+    (no absolute path of the machine that made the report)."""
+    text = os.fspath(path)
+    if not os.path.isabs(text):
+        return text
+    rel = os.path.relpath(text, Path.cwd())
+    if not rel.startswith(os.pardir + os.sep + os.pardir) and rel != os.pardir + os.sep + os.pardir:
+        return rel
+    parts = Path(text).parts
+    return os.path.join("...", *parts[-2:])
