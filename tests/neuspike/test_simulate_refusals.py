@@ -217,3 +217,16 @@ def test_help_and_usage_errors_do_not_load_the_simulator():
     done = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "heavy:", f"imported before the arguments were checked: {done.stdout}"
+
+
+def test_a_sweep_too_large_for_memory_is_refused_before_any_cell(tmp_path, capsys, no_simulation):
+    from bench.sweep import main as sweep_main
+
+    rc = sweep_main(["--axis", "light", "--lights", "1/4", "--size", "100000x100000", "--scenes", "pan:camera",
+                     "--methods", "tfp-w32", "--no-progress", "--no-report", "--out", str(tmp_path / "sweep")])
+    assert rc == 2
+    stderr = capsys.readouterr().err
+    err = [line for line in stderr.strip().splitlines() if line.startswith("error")]
+    assert "Traceback" not in stderr
+    assert len(err) == 1 and "at 100000x100000 would need about" in err[0] and "TiB of memory" in err[0], err
+    assert not (tmp_path / "sweep" / "results.csv").exists()
