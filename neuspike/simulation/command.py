@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from neuspike.checks import parse_size
+from neuspike.checks import check_nonnegative, check_positive, parse_size
 from neuspike.conditions import NOISE_LEVELS, Condition, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ
@@ -131,7 +131,6 @@ def _sequence_span(args: argparse.Namespace, sensor: Any, scene: Any = None) -> 
 def _check_work(args: argparse.Namespace, out: Path, mode: str, size: tuple[int, int], *, sensor: Any,
                 condition: Condition, modalities: frozenset[str], scene: Any = None) -> None:
     """Refuse, before any work, a simulation whose memory, disk or largest file cannot fit (naming the size)."""
-    from neuspike.checks import check_nonnegative, check_positive
     from neuspike.simulation.budget import check_budget, sequence_budget, window_budget
 
     width, height = size
