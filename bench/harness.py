@@ -414,8 +414,11 @@ def preflight(spec: SweepSpec) -> None:
         One message naming the scene and the problem.
     """
     from neuspike.metrics import SSIM_WINDOW_SIDE
+    from neuspike.resources import check_memory
     from neuspike.scenes import make_scene
+    from neuspike.simulation.budget import window_budget
 
+    conditions = {c.condition for c in spec.grid.cells()}
     for entry in spec.grid.scenes:
         size = entry.spec.size
         if size is not None and min(size) < SSIM_WINDOW_SIDE:
@@ -423,6 +426,10 @@ def preflight(spec: SweepSpec) -> None:
                 f"size {size[0]}x{size[1]}: both sides must be at least {SSIM_WINDOW_SIDE} pixels, the side of "
                 f"the pinned SSIM window (scene {entry.name})"
             )
+        if size is not None:  # before the scene is built: every cell renders the frames of one window at least
+            frames = max(window_budget(*size, sensor=spec.sensor, condition=c, modalities=("spikes",),
+                                       history_s=0.0).memory["frames"] for c in conditions)
+            check_memory(frames, f"a cell of scene {entry.name} at {size[0]}x{size[1]}", "the frames of one window")
         try:
             make_scene(entry.spec)
         except NeuSpikeError as exc:

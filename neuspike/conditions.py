@@ -102,7 +102,13 @@ def parse_effects(text: str) -> tuple[Effect, ...]:
     """Parse ``"refractory:period_s=1e-3,shot_noise:rate_hz=5;leak"`` style declarations.
 
     Effects are separated by ``;`` or by ``,`` before a new name; parameters follow ``name:`` as
-    ``key=value`` pairs separated by ``,``.
+    ``key=value`` pairs separated by ``,``. An empty text declares nothing.
+
+    Raises
+    ------
+    InputError
+        An empty entry (``"leak,,refractory"``, ``",,"``), an effect or a parameter given twice
+        (one would silently replace the other), or anything else that does not parse.
     """
     effects: list[Effect] = []
     text = text.strip()
@@ -110,12 +116,18 @@ def parse_effects(text: str) -> tuple[Effect, ...]:
         return ()
     current: str | None = None
     params: dict[str, float] = {}
+
+    def close() -> None:
+        if current is not None:
+            if any(e.name == current for e in effects):
+                raise InputError(f"effects {text!r}: {current!r} is declared twice (give it once, with every parameter)")
+            effects.append(effect(current, **params))
+
     for token in (t.strip() for t in text.replace(";", ",").split(",")):
         if not token:
-            continue
+            raise InputError(f"effects {text!r}: an empty entry between separators")
         if ":" in token or "=" not in token:
-            if current is not None:
-                effects.append(effect(current, **params))
+            close()
             name, _, first = token.partition(":")
             current, params = name.strip(), {}
             token = first.strip()
@@ -124,12 +136,13 @@ def parse_effects(text: str) -> tuple[Effect, ...]:
         if current is None or "=" not in token:
             raise InputError(f"cannot parse effect declaration {text!r} near {token!r}")
         key, _, value = token.partition("=")
+        if key.strip() in params:
+            raise InputError(f"effect {current!r}: {key.strip()} is given twice")
         try:
             params[key.strip()] = float(value)
         except ValueError:
             raise InputError(f"effect {current!r}: {key.strip()} must be a number, got {value!r}") from None
-    if current is not None:
-        effects.append(effect(current, **params))
+    close()
     return tuple(effects)
 
 

@@ -6,7 +6,8 @@ and mixes two runs. :func:`staged_folder` writes a whole folder under a temporar
 target (``.<name>.<id>.staging``) and swaps it in when complete: with ``renameat2(RENAME_EXCHANGE)``
 where the system has it (Linux, one atomic step), otherwise by two renames (a moment where the
 folder is absent, never mixed). Entries of the old folder that the run does not write (a user's own
-files) are carried over into the new one. A killed run's staging folders are removed by the next
+files) are carried over into the new one; temporaries of the run's own entries (``.<entry>.<id>.tmp``,
+left by a killed run) never are. A killed run's staging folders are removed by the next
 run into the same target, after giving back any such entries. One run at a time per target: a
 second run started meanwhile removes the first one's staging folder as stale.
 
@@ -99,10 +100,15 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(err, os.strerror(err), str(b))
 
 
+def _is_ours(name: str, ours: frozenset[str]) -> bool:
+    """An entry the run writes, or a temporary file of one (``.<entry>.<id>.tmp``, left by a killed run)."""
+    return name in ours or (name.endswith(".tmp") and any(name.startswith(f".{n}.") for n in ours))
+
+
 def _carry(src: Path, dst: Path, ours: frozenset[str]) -> None:
-    """Move the entries of ``src`` that a run does not write (``ours``) into ``dst``."""
+    """Move the entries of ``src`` that a run does not write (``ours``) into ``dst``; never a temporary of ours."""
     for entry in list(src.iterdir()):
-        if entry.name not in ours and not (dst / entry.name).exists():
+        if not _is_ours(entry.name, ours) and not (dst / entry.name).exists():
             os.replace(entry, dst / entry.name)
 
 

@@ -10,5 +10,6 @@ without loading the simulator):
 :mod:`~neuspike.simulation.cache`      the on-disk cache of windows, one file per modality
 :mod:`~neuspike.simulation.cell`       the one way from a (scene, condition, seed) cell to a recording
 :mod:`~neuspike.simulation.writing`    recording folders (``spikes.dat``, ``events.h5``, ground truth, ``meta.json``)
+:mod:`~neuspike.simulation.budget`     the memory and files a simulation needs, estimated before it starts
 :mod:`~neuspike.simulation.command`    ``python -m neuspike.simulate``
 """

@@ -258,14 +258,16 @@ class RecordingCache:
     def path(self, key: str) -> Path | None:
         return self.folder / f"{key}.npz" if self.folder is not None else None
 
-    def _load(self, key: str) -> Recording | None:
+    def _load(self, key: str, modality: str | None = None) -> Recording | None:
+        """The recording stored under ``key`` (holding ``modality`` when given), or None."""
         path = self.path(key)
         if path is None or not path.exists():
             return None
         try:
-            return load_recording(path)
+            recording = load_recording(path)
         except FormatError:
             return None  # simulated again and replaced
+        return None if modality is not None and getattr(recording, modality) is None else recording
 
     def get_or_simulate(
         self,
@@ -292,7 +294,7 @@ class RecordingCache:
         mods = check_modalities(modalities)
         ident = dict(scene_spec=scene_spec, condition=condition, sensor=sensor, seed=seed)
         keys = {m: part_key(**ident, modality=m, history_s=history_s) for m in MODALITIES if m in mods}
-        parts = {m: self._load(k) for m, k in keys.items()}
+        parts = {m: self._load(k, m) for m, k in keys.items()}
         missing = frozenset(m for m, part in parts.items() if part is None)
         if missing == mods:
             earlier = self._load(_request_key(**ident, modalities=mods, history_s=history_s))

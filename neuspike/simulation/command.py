@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from neuspike.checks import parse_size
+from neuspike.checks import check_nonnegative, check_positive, parse_size
 from neuspike.conditions import NOISE_LEVELS, Condition, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ
@@ -98,22 +98,13 @@ def main(argv: list[str] | None = None) -> int:
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except (OSError, MemoryError) as exc:  # the system's own refusal while working (disk full, file size limit)
+        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
 
 
-def _run(args: argparse.Namespace) -> int:
-    from neuspike.formats.staging import check_writable_folder
-    from neuspike.rng import derive_rng
-    from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulation.recording import SensorConfig, check_modalities
-    from neuspike.simulation.window import simulate_window
-    from neuspike.simulation.writing import write_recording, write_sequence
-
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    check_writable_folder(out.parent, what="--out: the folder", create=False)  # before any work
-    mode_wanted = args.mode or ("continuous" if args.video else "window")
-    if mode_wanted == "window" and isinstance(args.motion, int) and args.motion >= 1 and isinstance(args.planes, int) \
+def _check_motion(args: argparse.Namespace, mode: str) -> None:
+    if mode == "window" and isinstance(args.motion, int) and args.motion >= 1 and isinstance(args.planes, int) \
             and args.planes >= 1 and args.planes % args.motion:
         s_, t_ = args.motion, args.planes
         plane_counts = sorted({n for n in ((t_ // s_) * s_, (t_ // s_ + 1) * s_) if n > 0})
@@ -124,17 +115,77 @@ def _run(args: argparse.Namespace) -> int:
             f"for T // S planes): use {' or '.join(f'--planes {n}' for n in plane_counts)}, or "
             f"{' or '.join(f'--motion {d}' for d in sorted(near))}"
         )
+
+
+def _sequence_span(args: argparse.Namespace, sensor: Any, scene: Any = None) -> tuple[float, float]:
+    """Continuous mode: (scene start, scene duration) in seconds (a video's own span needs its scene)."""
+    video = scene is not None and args.video
+    start = args.at if not video or args.at else float(getattr(scene, "start_s", 0.0))
+    if args.duration is not None:
+        return start, args.duration
+    if video:
+        return start, float(scene.end_s) - start
+    return start, sensor.planes / sensor.plane_rate_hz * args.time_scale
+
+
+def _check_work(args: argparse.Namespace, out: Path, mode: str, size: tuple[int, int], *, sensor: Any,
+                condition: Condition, modalities: frozenset[str], scene: Any = None) -> None:
+    """Refuse, before any work, a simulation whose memory, disk or largest file cannot fit (naming the size)."""
+    from neuspike.simulation.budget import check_budget, sequence_budget, window_budget
+
+    width, height = size
+    if mode == "window":
+        history_s = check_nonnegative("--history", args.history)
+        budget = window_budget(width, height, sensor=sensor, condition=condition, modalities=modalities,
+                               history_s=history_s)
+    else:
+        start, duration = _sequence_span(args, sensor, scene)
+        check_positive("--duration", duration)
+        check_positive("--time-scale", args.time_scale)
+        planes = duration / args.time_scale * sensor.plane_rate_hz
+        frames = getattr(scene, "frame_times_s", None) if scene is not None else None
+        if frames is not None:
+            n_truth = float(sum(1 for t in frames if start <= t <= start + duration))
+        else:
+            n_truth = planes / 256 + 1
+        budget = sequence_budget(width, height, sensor=sensor, condition=condition, modalities=modalities,
+                                 planes=planes, ground_truth_frames=n_truth)
+    check_budget(budget, what=f"the simulation ({mode} mode, {width}x{height})", folder=out.parent)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from neuspike.formats.staging import check_writable_folder
+    from neuspike.simulation.recording import SensorConfig, check_modalities
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    # before any work: the folder the recording is swapped into, and an existing one whose entries move
+    check_writable_folder(out.parent, what="--out: the folder", create=False)
+    if out.is_dir():
+        check_writable_folder(out, what="--out", create=False)
+    mode = args.mode or ("continuous" if args.video else "window")
+    _check_motion(args, mode)
     modalities = check_modalities(m.strip() for m in args.modalities.split(",") if m.strip())
     sensor = SensorConfig(planes=args.planes, plane_rate_hz=args.plane_rate, spike_threshold=args.threshold,
                           event_threshold=args.event_threshold)
     condition = Condition(light=args.light, motion=args.motion, noise=args.noise, effects=parse_effects(args.effects))
+    size = args.size or (None if args.video else (400, 250))
+    if size is not None:
+        _check_work(args, out, mode, size, sensor=sensor, condition=condition, modalities=modalities)
+
+    from neuspike.rng import derive_rng
+    from neuspike.scenes import SceneSpec, make_scene
+    from neuspike.simulation.window import simulate_window
+    from neuspike.simulation.writing import write_recording, write_sequence
+
     spec_kwargs: dict[str, Any] = {}
     if args.video:
         spec_kwargs.update(kind="video", video=args.video, size=args.size)
         if args.upsample is not None:
             spec_kwargs["upsample"] = args.upsample
     else:
-        spec_kwargs.update(kind=args.scene, image=args.image, size=args.size or (400, 250))
+        spec_kwargs.update(kind=args.scene, image=args.image, size=size)
         if args.velocity is not None:
             spec_kwargs["velocity_px_s"] = tuple(args.velocity)
         if args.rpm is not None:
@@ -144,7 +195,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.dynamic_range is not None:
         spec_kwargs["dynamic_range"] = args.dynamic_range
     scene = make_scene(SceneSpec(**spec_kwargs))
-    mode = args.mode or ("continuous" if args.video else "window")
+    if args.video:  # its own size and frames are known now
+        _check_work(args, out, mode, (scene.width, scene.height), sensor=sensor, condition=condition,
+                    modalities=modalities, scene=scene)
     rng = derive_rng(args.seed, "simulate", scene.describe(), condition.as_dict(), mode)
     t0 = time.perf_counter()
     if mode == "window":
@@ -153,13 +206,7 @@ def _run(args: argparse.Namespace) -> int:
         write_recording(rec, out)
         meta = rec.meta
     else:
-        start = args.at if not args.video or args.at else float(getattr(scene, "start_s", 0.0))
-        if args.duration is not None:
-            duration = args.duration
-        elif args.video:
-            duration = float(scene.end_s) - start
-        else:
-            duration = sensor.planes / sensor.plane_rate_hz * args.time_scale
+        start, duration = _sequence_span(args, sensor, scene)
         meta = write_sequence(scene, condition, out, rng=rng, start_s=start, duration_s=duration, sensor=sensor,
                               time_scale=args.time_scale, modalities=modalities,
                               progress=not args.no_progress, seed=args.seed)
@@ -178,4 +225,3 @@ def _run(args: argparse.Namespace) -> int:
               f"{condition.light:g} is too high for threshold {sensor.spike_threshold:g}; spike methods cannot "
               f"tell their radiance apart)", file=sys.stderr)
     return 0
-

@@ -20,6 +20,8 @@ from neuspike.formats.events_io import EventsH5Writer, write_events_h5
 from neuspike.formats.staging import staged_folder
 from neuspike.formats.vidar_dat import DatWriter, write_dat
 from neuspike.images import write_png
+from neuspike.resources import check_file_size_limit
+from neuspike.simulation.budget import EVENTS_H5_CHUNK, Budget, check_budget, events_h5_bytes
 from neuspike.simulation.recording import MODALITIES, Recording, SensorConfig, check_modalities
 from neuspike.simulation.sequence import simulate_sequence
 from neuspike.streams import EventStream, SpikeStream
@@ -50,9 +52,21 @@ def write_recording(recording: Recording, out_dir: str | os.PathLike) -> dict[st
     (:data:`RECORDING_ENTRIES`) survives beside the new ones; other files in ``out_dir`` are kept.
     """
     final = Path(out_dir)
+    _check_room(recording, final)
     with staged_folder(final, ours=RECORDING_ENTRIES) as staging:
         written = _write_recording_files(recording, staging)
     return {k: final / v.name for k, v in written.items()}
+
+
+def _check_room(recording: Recording, folder: Path) -> None:
+    """Refuse, before writing, files that the free disk or the file size limit cannot take (naming the size)."""
+    h, w = recording.ground_truth.shape
+    files = {"gt.npy": 4.0 * h * w + 128, "gt.png": float(h * w)}
+    if recording.spikes is not None:
+        files["spikes.dat"] = recording.spikes.planes.size / 8
+    if recording.events is not None:
+        files["events.h5"] = events_h5_bytes(len(recording.events))
+    check_budget(Budget(files=files), what="the recording", folder=folder)
 
 
 def _write_recording_files(recording: Recording, out: Path) -> dict[str, Path]:
@@ -114,12 +128,20 @@ def _write_sequence_files(
     sensor: SensorConfig, time_scale: float, mods: frozenset[str], progress: bool, seed: int | None,
 ) -> dict[str, Any]:
     dat = DatWriter(out / "spikes.dat") if SPIKES in mods else None
-    h5 = EventsH5Writer(out / "events.h5", scene.width, scene.height) if EVENTS in mods else None
+    h5 = EventsH5Writer(out / "events.h5", scene.width, scene.height, chunk_events=EVENTS_H5_CHUNK) \
+        if EVENTS in mods else None
+    written = {"spikes.dat": 0.0, "events.h5": 0}
 
     def on_chunk(spikes: SpikeStream | None, events: EventStream | None) -> None:
+        # a file about to outgrow the file size limit stops the run here, in one line (the system's
+        # own refusal comes partway through a write, which HDF5 does not survive)
         if dat is not None and spikes is not None:
+            written["spikes.dat"] += spikes.planes.size / 8
+            check_file_size_limit(written["spikes.dat"], "spikes.dat")
             dat.write(spikes.planes)
         if h5 is not None and events is not None:
+            written["events.h5"] += len(events)
+            check_file_size_limit(events_h5_bytes(written["events.h5"], chunk_events=EVENTS_H5_CHUNK), "events.h5")
             h5.write(events)
 
     ok = False

@@ -1,0 +1,84 @@
+"""Whether requested work fits this machine: memory, free disk, the file size limit.
+
+Commands estimate what a job needs before starting it and refuse, in one line naming the sizes,
+what cannot fit, rather than failing partway (an allocation error after minutes of work, a disk
+filled with temporary files, ``OSError: File too large``).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from neuspike.errors import InputError
+
+__all__ = ["available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "format_bytes"]
+
+_UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB")
+
+
+def format_bytes(n: float) -> str:
+    """``6.34 TiB``: a byte count in binary units, three significant digits."""
+    n = float(n)
+    for unit in _UNITS:
+        if abs(n) < 1024 or unit == _UNITS[-1]:
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")
+
+
+def available_memory_bytes() -> int | None:
+    """Memory the system can give a new allocation without swapping (``MemAvailable``); None when unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes: float, what: str, detail: str = "") -> None:
+    """Raise :class:`InputError` when ``nbytes`` exceed the memory available now.
+
+    ``what`` names the work (``"the simulation"``), ``detail`` what the bytes are (``"frames 1.2 GiB, ..."``).
+    """
+    available = available_memory_bytes()
+    if available is not None and nbytes > available:
+        raise InputError(f"{what} would need about {format_bytes(nbytes)} of memory"
+                         f"{f' ({detail})' if detail else ''}; {format_bytes(available)} is available")
+
+
+def _existing(folder: str | os.PathLike) -> Path:
+    path = Path(folder).absolute()
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def check_disk(folder: str | os.PathLike, nbytes: float, what: str, detail: str = "") -> None:
+    """Raise :class:`InputError` when ``nbytes`` exceed the free space of the file system of ``folder``."""
+    try:
+        free = shutil.disk_usage(_existing(folder)).free
+    except OSError:
+        return
+    if nbytes > free:
+        raise InputError(f"{what} would need about {format_bytes(nbytes)} on disk"
+                         f"{f' ({detail})' if detail else ''}; {format_bytes(free)} is free in {_existing(folder)}")
+
+
+def check_file_size_limit(nbytes: float, what: str) -> None:
+    """Raise :class:`InputError` when a file of ``nbytes`` exceeds this process's file size limit (``ulimit -f``)."""
+    try:
+        import resource
+    except ImportError:  # not on this system
+        return
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY and nbytes > soft:
+        raise InputError(f"{what} would be about {format_bytes(nbytes)}, over this process's file size limit "
+                         f"of {format_bytes(soft)} (ulimit -f)")
