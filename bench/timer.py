@@ -154,7 +154,7 @@ def representative_sample(width: int, height: int, *, history_windows: float = D
                           modalities: Iterable[str] = ("spikes", "events"), seed: int = 0) -> Sample:
     """The sample every method is timed on at one resolution (module docstring), without ground truth.
 
-    Built by :func:`neuspike.simulate.simulate_sample`, the sweeps' own cell-to-sample path, so a
+    Built by :func:`neuspike.simulation.cell.simulate_sample`, the sweeps' own cell-to-sample path, so a
     timed sample is the one a sweep cell of the same scene, condition and seed would see.
 
     Parameters
