@@ -31,11 +31,9 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
-import pandas as pd
 
-from bench.results import read_csv, sort_rows, to_csv_text
 from neuspike.atomic import write_bytes, write_json, write_text
 from neuspike.errors import InputError
 
@@ -43,6 +41,9 @@ __all__ = ["merge_sweeps", "main"]
 
 #: Cell identity columns: rows of two folders describe the same cell when these agree.
 CELL_KEY = ("scene", "kind", "image", "width", "height", "planes", "light", "motion", "noise", "seed")
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
@@ -57,6 +58,8 @@ def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
         raise InputError(f"{folder}: unreadable JSON ({exc})") from exc
     if "sweep" not in config:
         raise InputError(f"{folder}/config.json: no 'sweep' section (not written by bench.sweep or bench.noise)")
+    from bench.results import read_csv
+
     return config, metadata, read_csv(paths["results.csv"])
 
 
@@ -85,6 +88,10 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
         Fewer than two folders, a folder that is not a finished sweep, sweeps of different cells,
         overlapping methods (without ``replace``), or cells missing from a folder.
     """
+    import pandas as pd
+
+    from bench.results import sort_rows, to_csv_text
+
     folders = [Path(f) for f in folders]
     if len(folders) < 2:
         raise InputError("merge needs at least two sweep folders")

@@ -45,18 +45,18 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
-import pandas as pd
 
-from bench import tables as tb
-from bench import timer
 from neuspike.errors import InputError
 from neuspike.parallel import set_threads
 
 WIDTH, HEIGHT = 400, 250
 REFERENCE_PLANES = 41
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -126,6 +126,8 @@ def tfp_reference_row(window: int) -> str:
 
 
 def _time_row(name: str, fn: Callable[[], Any], column: str, *, repeats: int, warmup: int) -> dict[str, Any]:
+    from bench import timer
+
     stats = timer.time_callable(fn, repeats=repeats, warmup=warmup).summary()
     return {"method": name, "family": "reference", "status": "ok", "error": "",
             f"{column}_median": stats["median_ms"], f"{column}_min": stats["min_ms"], f"{column}_max": stats["max_ms"]}
@@ -161,6 +163,8 @@ def reference_rows(names: Sequence[str], created: dict[str, tuple[Any, str]], sa
 # --- measuring ----------------------------------------------------------------------------------
 
 def _spread(row: dict[str, Any], prefix: str) -> str:
+    from bench import tables as tb
+
     med = row.get(f"{prefix}_median")
     if med is None or (isinstance(med, float) and math.isnan(med)):
         return "-"
@@ -184,6 +188,8 @@ def thread_counts() -> dict[str, int]:
 
 def pin_threads(threads: int) -> dict[str, int]:
     """Set torch's intra-op pool and numba's pool to ``threads`` (numba: at most its launch count)."""
+    from bench import timer
+
     set_threads(timer.check_count("threads", threads, 1))
     return thread_counts()
 
@@ -202,6 +208,9 @@ def judge(frame: pd.DataFrame) -> pd.DataFrame:
     ``ratio`` is the method's median over the limit (<= 1 meets it); the limit is the target's fixed
     figure or the median of its same-run reference row.
     """
+    import pandas as pd
+    from bench import tables as tb
+
     medians = {str(r["method"]): r for r in frame.to_dict("records")}
     out = []
     for row in frame.to_dict("records"):
@@ -234,6 +243,8 @@ def judge(frame: pd.DataFrame) -> pd.DataFrame:
 
 def verdict_lines(frame: pd.DataFrame) -> list[str]:
     """One line per target row: the figure, the limit, met / missed with the ratio, and the reference."""
+    from bench import tables as tb
+
     lines = []
     for row in frame.to_dict("records"):
         target = target_of(str(row["method"]))
@@ -253,6 +264,9 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
             log=None) -> pd.DataFrame:
     """One row per method and per same-run reference: ms on the 256-plane and (spike methods) 41-plane
     windows, per step, threads, load, and the verdict of the method's target."""
+    import pandas as pd
+    from bench import timer
+
     created = timer.create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for method, _ in created.values() if method is not None for m in method.inputs}
     if "snm" in names or "tfstp" in names:
@@ -304,6 +318,9 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
 
 def markdown(frame: pd.DataFrame, repeats: int, warmup: int, machine: str) -> str:
     """The benchmark's table: median [min-max] ms per frame beside the references, targets and verdicts."""
+    import pandas as pd
+    from bench import tables as tb
+
     rows = []
     methods = frame[~frame["method"].astype(str).str.startswith("ref:")]
     refs = frame[frame["method"].astype(str).str.startswith("ref:")]
@@ -357,11 +374,13 @@ def _usable_cpus() -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from bench import tables as tb
+    from bench import timer
     from bench.provenance import machine
     from neuspike.atomic import write_text
     from neuspike.weights import weights_dir_from_env
 
-    args = build_parser().parse_args(argv)
     try:
         if args.out:
             from neuspike.formats.staging import check_writable_folder

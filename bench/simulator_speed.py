@@ -34,10 +34,8 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from neuspike.conditions import EVENT_PRESETS, effect
-from neuspike.scenes import SceneSpec, make_scene
+from neuspike.scenes import SceneSpec
 from neuspike.parallel import NUMBA_AVAILABLE
-from neuspike.sensors.event_camera import EventCamera
-from neuspike.sensors.spike_camera import SpikeCamera
 
 FRAME_RATE_HZ = 22_500.0
 PX_PER_FRAME = 2.0
@@ -69,6 +67,8 @@ WINDOW_SIZES = ((128, 128), (400, 250))
 
 def standard_input(width: int, height: int, frames: int = FRAMES) -> tuple[np.ndarray, np.ndarray]:
     """The panning ``camera`` frames (frames, H, W) float32 and their times (frames,) in seconds."""
+    from neuspike.scenes import make_scene
+
     times = np.arange(frames, dtype=np.float64) / FRAME_RATE_HZ
     scene = make_scene(SceneSpec(kind="pan", image="camera", size=(width, height),
                                  velocity_px_s=(PX_PER_FRAME * FRAME_RATE_HZ, 0.0)))
@@ -121,6 +121,9 @@ def _get_numba_threads() -> int:
 
 def cases(frames: np.ndarray, times: np.ndarray) -> list[Case]:
     """Every timed configuration, references first."""
+    from neuspike.sensors.event_camera import EventCamera
+    from neuspike.sensors.spike_camera import SpikeCamera
+
     _, h, w = frames.shape
     out: list[Case] = [Case("spike", "no effects", "plain NumPy loop", 1, lambda: plain_integrate_and_fire(frames),
                             lambda p: int(np.count_nonzero(p)))]
