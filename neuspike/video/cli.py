@@ -34,12 +34,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Sequence
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Sequence
 
 from neuspike.cli import ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError
+
+if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
+    import numpy as np
 
 __all__ = ["VideoSpec", "build_parser", "run", "main"]
 
@@ -141,7 +142,7 @@ def _split(values: Sequence[str]) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     """The frozen spec of parsed arguments (usage checks only; files are checked by :func:`run`)."""
-    from neuspike.weights import weights_dir_from_env
+    from neuspike.cli import weights_dir_from_env
 
     if args.out is None:
         raise InputError("give an output folder with --out DIR")
@@ -215,6 +216,8 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         A failed check; nothing is written when the checks before the work fail, and nothing
         under a final name when the work fails.
     """
+    import numpy as np
+
     from neuspike.formats.staging import check_writable_folder, staged_folder
     from neuspike.metrics import SSIM_WINDOW_SIDE
     from neuspike.video.stream import check_fps, frame_times, open_recording
@@ -303,6 +306,8 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
            truth: Any, sheet_idx: list[int], out: Path, stream: Any) -> dict[str, Any]:
     """Stream ``rec`` through ``methods`` and write every output into ``out`` (a staging folder);
     return the summary written to ``video.json``."""
+    import numpy as np
+
     from neuspike.atomic import write_text
     from neuspike.video.stream import stream_methods
     from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, plot_metrics, score_frame
