@@ -16,6 +16,7 @@ from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable, create_many
 from neuspike.simulate import SensorConfig
+from tests.bench.test_timing import Unavailable
 
 NAME = "zz-learned"
 BUILT: list[str] = []
@@ -127,24 +128,9 @@ def test_a_folder_written_before_the_identity_resumes_as_the_cpu_with_its_record
 # create_many: the one way every front end creates methods
 # ----------------------------------------------------------------------------------------------
 
-class Unavailable(Method):
-    inputs = frozenset({"events"})
-
-    def __init__(self, name=None, **params):
-        raise MethodUnavailable("weights not given (test)")
-
-    def _reconstruct(self, sample):
-        raise AssertionError("never called")
-
-
-class Broken(Method):
-    inputs = frozenset({"events"})
-
+class Broken(Unavailable):
     def __init__(self, name=None, **params):
         raise RuntimeError("cannot build (test)")
-
-    def _reconstruct(self, sample):
-        raise AssertionError("never called")
 
 
 @pytest.fixture

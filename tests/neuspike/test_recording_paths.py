@@ -142,3 +142,24 @@ def test_a_plane_rate_in_meta_json_that_is_not_positive_is_refused(tmp_path, cap
     assert cause in _one_error_line(capsys)
     assert video_main([str(tmp_path), "--method", "tfp", "--out", str(tmp_path / "v"), "--no-progress"]) == 2
     assert cause in _one_error_line(capsys)
+
+
+@pytest.mark.parametrize("methods, cause", [
+    ("tfp", r"device 'cuda:7': none of the methods \(tfp\) runs on a torch device"),
+    ("tfp,e2vid", r"device: 'cuda:7' was asked for but this machine has"),
+])
+def test_both_commands_refuse_a_device_they_cannot_use_before_any_work(tmp_path, capsys, methods, cause):
+    import re
+
+    import torch
+
+    if torch.cuda.device_count() > 7:
+        pytest.skip("this machine has a cuda:7")
+    write_dat(tmp_path / "spikes.dat", np.zeros((64, H, W), dtype=bool))
+    events = _common_h5(tmp_path / "e.h5")
+    inputs = ["--spikes", str(tmp_path / "spikes.dat"), "--events", str(events), "--height", str(H), "--width", str(W)]
+    rc = reconstruct_main(["--method", methods, *inputs, "--device", "cuda:7", "--out", str(tmp_path / "r")])
+    assert rc == 2 and re.search(cause, _one_error_line(capsys))
+    rc = video_main(["--method", methods, *inputs, "--device", "cuda:7", "--out", str(tmp_path / "v"), "--no-progress"])
+    assert rc == 2 and re.search(cause, _one_error_line(capsys))
+    assert not (tmp_path / "r").exists() and not (tmp_path / "v").exists()
