@@ -26,7 +26,7 @@ up on the sample's event history. Output: the sigmoid's value (already in [0, 1]
 ``"clamp"``, which changes nothing here).
 
 Weights: ``e2vid.safetensors`` (with its JSON card ``e2vid.json``), trained with
-``python -m neuspike.train.sequences e2vid`` and shipped in ``neuspike/trained/``; found without any
+``python -m neuspike.train e2vid`` and shipped in ``neuspike/trained/``; found without any
 flag and loaded strictly.
 """
 
@@ -109,8 +109,6 @@ class E2VID(FireNet):
     Parameters are FireNet's (``normalize``, ``events_per_pixel``, ``max_windows``) and those of every
     :class:`~neuspike.learned.LearnedMethod`; the weights are our own safetensors.
     """
-
-    weights_subdirs = ()
 
     def build_module(self) -> nn.Module:
         return E2VIDModule()

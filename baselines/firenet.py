@@ -29,9 +29,9 @@ tensor in the file is used, none of the module's is missing, and all shapes agre
 a :class:`~neuspike.errors.FormatError` naming the offending keys.
 
 The weights come from the user: a folder passed as ``weights_dir`` (the commands' ``--weights``,
-or their ``NEUSPIKE_WEIGHTS`` variable), declared in the registry entry and resolved by
-:func:`neuspike.weights.resolve_weights`: the file is looked up as ``<dir>/firenet/<file>`` and then
-``<dir>/<file>``, so either the weights root or the FireNet folder itself may be named. When no
+or their ``NEUSPIKE_WEIGHTS`` variable), declared in the registry entry (its :class:`~neuspike.methods.WeightsConfig`, sub-folder
+``firenet``) and resolved by :func:`neuspike.weights.resolve_weights`: the file is looked up as
+``<dir>/firenet/<file>`` and then ``<dir>/<file>``, so either the weights root or the FireNet folder itself may be named. When no
 folder is given or the file is not there, constructing the method raises
 :class:`~neuspike.weights.WeightsNotFound` (a :class:`~neuspike.methods.MethodUnavailable`) naming
 every path tried; the harness records the reason and skips the method.
@@ -82,7 +82,7 @@ from torch import nn
 from neuspike.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
 from neuspike.learned import CLAMP, LearnedMethod
-from neuspike.methods import Method
+from neuspike.methods import WeightsConfig
 from neuspike.nn import ConvGRU, ResidualBlock
 from neuspike.representations import event_windows, voxel_grid
 from neuspike.sample import Sample
@@ -252,13 +252,11 @@ class FireNet(LearnedMethod):
 
     inputs = frozenset({"events"})
     recurrent = True
-    weights_subdirs = ("firenet",)
 
     def __init__(self, name: str | None = None, *, normalize: bool, events_per_pixel: float = 0.35,
                  max_windows: int = 24, **learned: Any) -> None:
         if not isinstance(normalize, bool):
             raise InputError(f"normalize: expected True or False, got {normalize!r}")
-        self.layout: str | None = None
         super().__init__(
             name,
             normalize=normalize,
@@ -271,12 +269,18 @@ class FireNet(LearnedMethod):
     def build_module(self) -> nn.Module:
         return FireNetModule()
 
-    def load_weights(self, module: nn.Module, path: Path) -> None:
+    def load_weights(self, module: nn.Module, path: Path) -> str:
+        """Our own safetensors (``"safetensors"``), or a published ``.pt`` in either layout (``"legacy"``, ``"plus"``)."""
         if path.suffix == ".safetensors":  # our own (firenet-sim), in the module's own names
-            self.layout = "safetensors"
             return super().load_weights(module, path)
-        mapped, self.layout = map_state_dict(load_torch_state(path))
-        load_state_strict(module, mapped, f"{path} ({self.layout} layout)")
+        mapped, layout = map_state_dict(load_torch_state(path))
+        load_state_strict(module, mapped, f"{path} ({layout} layout)")
+        return layout
+
+    @property
+    def layout(self) -> str | None:
+        """The layout the weights were read in (``"safetensors"``, ``"legacy"``, ``"plus"``; ``None`` untrained)."""
+        return self.weights_layout
 
     @property
     def windows_used(self) -> int | None:
@@ -313,24 +317,11 @@ class FireNet(LearnedMethod):
 
     @classmethod
     def for_training(cls, name: str | None = None, **params: Any) -> "FireNet":
-        """The method with a fresh, untrained module and no weights file (what a trainer encodes and trains with).
-
-        ``params`` are the registry entry's (``normalize``, ...); the module stays float32 on the CPU in
-        train mode, ``weights_path`` is ``None``.
-        """
-        import inspect
-
-        defaults = {k: v.default for k, v in inspect.signature(FireNet.__init__).parameters.items()
-                    if v.kind is v.KEYWORD_ONLY and v.default is not v.empty}
-        self = cls.__new__(cls)
-        Method.__init__(self, name, precision="float32", **{**defaults, **params})
-        self.layout = None
-        self.device = torch.device("cpu")
-        self.weights_path = None
-        self.weights_sha256 = None
-        self.module = self.build_module()
-        self._state = None
-        return self
+        """The method around a fresh module (the base's), in torch's default memory layout: training
+        runs there, inference in channels-last."""
+        method = super().for_training(name, **params)
+        method.module = method.module.to(memory_format=torch.contiguous_format)
+        return method
 
     def windows(self, sample: Sample) -> list[tuple[int, int, float, float]]:
         """The fixed-count windows :meth:`encode` steps through, as :func:`event_windows` gives them."""
@@ -429,10 +420,12 @@ class FireNet(LearnedMethod):
 
 def register_methods(register) -> None:
     """Add ``firenet``, ``firenet-plus`` and ``firenet-sim`` to the registry."""
-    register("firenet", FireNet, params={"normalize": True}, weights="firenet.pt",
+    register("firenet", FireNet, params={"normalize": True}, weights=WeightsConfig("firenet.pt", subdirs=("firenet",)),
              description="FireNet (published weights), normalised 5-bin voxel grids, 0.35 events/pixel windows")
-    register("firenet-plus", FireNet, params={"normalize": False}, weights="firenet_plus.pt",
+    register("firenet-plus", FireNet, params={"normalize": False},
+             weights=WeightsConfig("firenet_plus.pt", subdirs=("firenet",)),
              description="FireNet+ (published weights), raw 5-bin voxel grids, 0.35 events/pixel windows")
-    register("firenet-sim", FireNet, params={"normalize": True}, weights="firenet-sim.safetensors",
-             description="FireNet trained here on the simulator (python -m neuspike.train.sequences firenet-sim), "
+    register("firenet-sim", FireNet, params={"normalize": True},
+             weights=WeightsConfig("firenet-sim.safetensors", subdirs=("firenet",)),
+             description="FireNet trained here on the simulator (python -m neuspike.train firenet-sim), "
                          "normalised 5-bin voxel grids, 0.35 events/pixel windows")

@@ -113,6 +113,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -120,10 +121,10 @@ import numpy as np
 import torch
 
 from neuspike.normalisation import rate_to_image
-from neuspike.checks import check_nonnegative, check_positive
+from neuspike.checks import check_int, check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 __all__ = [
@@ -354,27 +355,60 @@ class _Params:
     dynamic_refining: bool
 
 
-def _params(
-    plane_rate_hz: float,
-    threshold_time_constant_ms: float,
-    stdp_time_constant_ms: float,
-    coupling_length_px: float,
-    motion_threshold: float,
-    motion_memory_isi: float,
-    step_forgetting: float,
-    dynamic_refining: bool,
-) -> _Params:
-    if not isinstance(dynamic_refining, (bool, np.bool_)):
-        raise InputError(f"dynamic_refining: expected True or False, got {dynamic_refining!r}")
-    return _Params(
-        threshold_tau_planes=ms_to_planes(threshold_time_constant_ms, plane_rate_hz),
-        stdp_tau_planes=ms_to_planes(stdp_time_constant_ms, plane_rate_hz),
-        coupling_length_px=check_nonnegative("coupling_length_px", coupling_length_px),
-        motion_threshold=check_nonnegative("motion_threshold", motion_threshold),
-        motion_memory_isi=check_positive("motion_memory_isi", motion_memory_isi),
-        step_forgetting=check_nonnegative("step_forgetting", step_forgetting),
-        dynamic_refining=bool(dynamic_refining),
-    )
+@dataclass(frozen=True)
+class SNMParams:
+    """The model's parameters in their physical units, validated once (see :class:`SNM` for each).
+
+    Raises
+    ------
+    InputError
+        For a value outside its range (stored as float, or bool for ``dynamic_refining``, otherwise).
+    """
+
+    threshold_time_constant_ms: float = THRESHOLD_TIME_CONSTANT_MS
+    stdp_time_constant_ms: float = STDP_TIME_CONSTANT_MS
+    coupling_length_px: float = COUPLING_LENGTH_PX
+    motion_threshold: float = MOTION_THRESHOLD
+    motion_memory_isi: float = MOTION_MEMORY_ISI
+    step_forgetting: float = STEP_FORGETTING
+    dynamic_refining: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.dynamic_refining, (bool, np.bool_)):
+            raise InputError(f"dynamic_refining: expected True or False, got {self.dynamic_refining!r}")
+        checked = {
+            "threshold_time_constant_ms": check_positive("threshold_time_constant_ms", self.threshold_time_constant_ms),
+            "stdp_time_constant_ms": check_positive("stdp_time_constant_ms", self.stdp_time_constant_ms),
+            "coupling_length_px": check_nonnegative("coupling_length_px", self.coupling_length_px),
+            "motion_threshold": check_nonnegative("motion_threshold", self.motion_threshold),
+            "motion_memory_isi": check_positive("motion_memory_isi", self.motion_memory_isi),
+            "step_forgetting": check_nonnegative("step_forgetting", self.step_forgetting),
+            "dynamic_refining": bool(self.dynamic_refining),
+        }
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+
+    def in_planes(self, plane_rate_hz: float) -> _Params:
+        """The parameters with their time constants in planes of a sensor at ``plane_rate_hz``."""
+        return _Params(
+            threshold_tau_planes=ms_to_planes(self.threshold_time_constant_ms, plane_rate_hz),
+            stdp_tau_planes=ms_to_planes(self.stdp_time_constant_ms, plane_rate_hz),
+            coupling_length_px=self.coupling_length_px,
+            motion_threshold=self.motion_threshold,
+            motion_memory_isi=self.motion_memory_isi,
+            step_forgetting=self.step_forgetting,
+            dynamic_refining=self.dynamic_refining,
+        )
+
+
+#: The model's default parameters.
+DEFAULT_PARAMS = SNMParams()
+
+
+def _params(params: Any, plane_rate_hz: float) -> _Params:
+    if not isinstance(params, SNMParams):
+        raise InputError(f"params: expected an SNMParams, got {type(params).__name__}")
+    return params.in_planes(plane_rate_hz)
 
 
 def _check_planes(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
@@ -386,8 +420,7 @@ def _check_planes(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
         raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
     if min(planes.shape) < 1:
         raise InputError(f"planes: expected at least one plane of at least 1x1 pixels, got shape {planes.shape}")
-    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
-        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
+    key_plane = check_int("key_plane", key_plane, what="an integer plane index")
     if not 0 <= key_plane < planes.shape[0]:
         raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
     return np.ascontiguousarray(planes), int(key_plane)
@@ -461,13 +494,9 @@ def _next_spike_tables(spikes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor
 def snm_state(
     planes: np.ndarray,
     key_plane: int,
+    params: SNMParams = DEFAULT_PARAMS,
     *,
     plane_rate_hz: float,
-    threshold_time_constant_ms: float = THRESHOLD_TIME_CONSTANT_MS,
-    motion_threshold: float = MOTION_THRESHOLD,
-    motion_memory_isi: float = MOTION_MEMORY_ISI,
-    step_forgetting: float = STEP_FORGETTING,
-    dynamic_refining: bool = True,
     backend: str = "auto",
 ) -> SNMState:
     """Run the motion-excitation, refining and reconstruction layers over the window.
@@ -478,10 +507,10 @@ def snm_state(
         The spike window.
     key_plane : int in [0, T)
         The plane to reconstruct.
+    params : SNMParams
+        The model's parameters (the coupling is not used here).
     plane_rate_hz : float > 0
         Planes per second of sensor time (converts the time constants to planes).
-    threshold_time_constant_ms, motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining
-        See :class:`SNM`.
     backend : {"auto", "numba", "torch"}
         ``"numba"``: the compiled kernel (:mod:`baselines.snm_kernels`); ``"torch"``: the reference
         plane loop of tensor operations; ``"auto"``: numba where it can be imported. Both compute
@@ -503,8 +532,7 @@ def snm_state(
     of an (H, W) float32 buffer; the comment above it gives the quantity.
     """
     planes, key_plane = _check_planes(planes, key_plane)
-    p = _params(plane_rate_hz, threshold_time_constant_ms, STDP_TIME_CONSTANT_MS, COUPLING_LENGTH_PX,
-                motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining)
+    p = _params(params, plane_rate_hz)
     if _resolve_backend(backend) == "numba" and _kernels.fits_exp_range(1.0 / p.motion_memory_isi, planes.shape[0]):
         return _integrate_compiled(planes, key_plane, p)
     with _one_intra_op_thread():
@@ -513,14 +541,7 @@ def snm_state(
 
 def _resolve_backend(backend: Any) -> str:
     """``"numba"`` or ``"torch"`` for a requested backend (see :data:`BACKENDS`)."""
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if _kernels is not None and parallel_usable() else "torch"
-    if backend == "numba" and _kernels is None:
-        raise InputError("backend 'numba': numba cannot be imported here; use backend='torch' or 'auto'")
-    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
-    return backend if parallel_usable() else "torch"
+    return resolve_backend(backend, compiled=_kernels is not None, reference="torch")
 
 
 def _still_decay(p: _Params) -> np.float32:
@@ -702,15 +723,9 @@ def _couple(rate: torch.Tensor, mass: torch.Tensor, weights: np.ndarray, stdp_ta
 def snm_rate(
     planes: np.ndarray,
     key_plane: int,
+    params: SNMParams = DEFAULT_PARAMS,
     *,
     plane_rate_hz: float,
-    threshold_time_constant_ms: float = THRESHOLD_TIME_CONSTANT_MS,
-    stdp_time_constant_ms: float = STDP_TIME_CONSTANT_MS,
-    coupling_length_px: float = COUPLING_LENGTH_PX,
-    motion_threshold: float = MOTION_THRESHOLD,
-    motion_memory_isi: float = MOTION_MEMORY_ISI,
-    step_forgetting: float = STEP_FORGETTING,
-    dynamic_refining: bool = True,
     backend: str = "auto",
 ) -> np.ndarray:
     """SNM-style spike rate at the key plane, read out of the adaptive thresholds.
@@ -721,11 +736,10 @@ def snm_rate(
         The spike window.
     key_plane : int in [0, T)
         The plane to reconstruct.
+    params : SNMParams
+        The model's parameters.
     plane_rate_hz : float > 0
         Planes per second of sensor time.
-    threshold_time_constant_ms, stdp_time_constant_ms, coupling_length_px, motion_threshold,
-    motion_memory_isi, step_forgetting, dynamic_refining
-        See :class:`SNM`.
     backend : {"auto", "numba", "torch"}
         The plane loops' implementation (see :func:`snm_state`).
 
@@ -736,13 +750,8 @@ def snm_rate(
     complete ISI read 0 without a spike and the phase-unbiased single-spike estimate with one (see
     the module docstring).
     """
-    p = _params(plane_rate_hz, threshold_time_constant_ms, stdp_time_constant_ms, coupling_length_px,
-                motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining)
-    state = snm_state(
-        planes, key_plane, plane_rate_hz=plane_rate_hz, threshold_time_constant_ms=threshold_time_constant_ms,
-        motion_threshold=motion_threshold, motion_memory_isi=motion_memory_isi,
-        step_forgetting=step_forgetting, dynamic_refining=dynamic_refining, backend=backend,
-    )
+    p = _params(params, plane_rate_hz)
+    state = snm_state(planes, key_plane, params, plane_rate_hz=plane_rate_hz, backend=backend)
     with _one_intra_op_thread():
         known = state.mass > 0
         rate = torch.where(
@@ -795,23 +804,13 @@ class SNM(Method):
         step_forgetting: float = STEP_FORGETTING,
         dynamic_refining: bool = True,
     ) -> None:
-        # Validate now (any plane rate will do), so a bad parameter fails at construction.
-        _params(1000.0, threshold_time_constant_ms, stdp_time_constant_ms, coupling_length_px,
-                motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining)
-        super().__init__(
-            name,
-            threshold_time_constant_ms=float(threshold_time_constant_ms),
-            stdp_time_constant_ms=float(stdp_time_constant_ms),
-            coupling_length_px=float(coupling_length_px),
-            motion_threshold=float(motion_threshold),
-            motion_memory_isi=float(motion_memory_isi),
-            step_forgetting=float(step_forgetting),
-            dynamic_refining=bool(dynamic_refining),
-        )
+        self.snm = SNMParams(threshold_time_constant_ms, stdp_time_constant_ms, coupling_length_px,
+                             motion_threshold, motion_memory_isi, step_forgetting, dynamic_refining)
+        super().__init__(name, **dataclasses.asdict(self.snm))
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
-        rate = snm_rate(stream.planes, sample.key_plane, plane_rate_hz=stream.plane_rate_hz, **self.params)
+        rate = snm_rate(stream.planes, sample.key_plane, self.snm, plane_rate_hz=stream.plane_rate_hz)
         return rate_to_image(rate, stream.gain)
 
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_spike_window
+from neuspike.checks import check_int, check_positive_int, check_spike_window
 from neuspike.errors import InputError
 from neuspike.normalisation import rate_to_image
 from neuspike.representations import spike_count
@@ -45,9 +45,7 @@ VARIANT_WINDOWS_PLANES = (8, 16, 32, 64)
 def _check_window(window: Any) -> int | None:
     if window is None:
         return None
-    if isinstance(window, (bool, np.bool_)) or not isinstance(window, (int, np.integer)) or window < 1:
-        raise InputError(f"window: expected None (the whole stream) or a whole number of planes >= 1, got {window!r}")
-    return int(window)
+    return check_int("window", window, minimum=1, what="None (the whole stream) or a whole number of planes")
 
 
 def tfp_window(num_planes: int, key_plane: int, window: int | None) -> tuple[int, int]:
@@ -68,10 +66,8 @@ def tfp_window(num_planes: int, key_plane: int, window: int | None) -> tuple[int
         ``stop - start = min(window, T)`` planes (``T`` when ``window`` is ``None``); see the module
         docstring for the placement of even windows and the shift at the stream's ends.
     """
-    if isinstance(num_planes, (bool, np.bool_)) or not isinstance(num_planes, (int, np.integer)) or num_planes < 1:
-        raise InputError(f"num_planes: expected a whole number >= 1, got {num_planes!r}")
-    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
-        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
+    num_planes = check_positive_int("num_planes", num_planes)
+    key_plane = check_int("key_plane", key_plane, what="an integer plane index")
     if not 0 <= key_plane < num_planes:
         raise InputError(f"key_plane: expected an index in [0, {num_planes}), got {key_plane}")
     window = _check_window(window)

@@ -60,6 +60,8 @@ occur, plane by plane, over the pixels that fire in that plane.
 from __future__ import annotations
 
 import math
+import dataclasses
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -68,7 +70,7 @@ from neuspike.normalisation import rate_to_image
 from neuspike.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 U0 = 0.15
@@ -91,41 +93,62 @@ _TINY = 1.0e-290
 _SATURATED = "TFSTP read-out: a state reached its saturation (u = 1 or R = 0); check the parameters"
 
 
-def check_stp_params(
-    u0: Any, recovery_planes: Any, facilitation_planes: Any, facilitation: Any
-) -> tuple[float, float, float, float]:
-    """Validate the STP parameters; return them as floats.
+@dataclass(frozen=True)
+class STPParams:
+    """The four parameters of the short-term-plasticity synapse, validated once.
 
-    ``u0`` and ``facilitation`` in (0, 1); ``recovery_planes`` and ``facilitation_planes`` in
-    (0, MAX_TIME_CONSTANT_PLANES].
+    Parameters
+    ----------
+    u0 : float in (0, 1)
+        Resting utilisation.
+    recovery_planes : float in (0, MAX_TIME_CONSTANT_PLANES]
+        ``D``, the resources' recovery time constant, in planes.
+    facilitation_planes : float in (0, MAX_TIME_CONSTANT_PLANES]
+        ``F``, the utilisation's decay time constant, in planes.
+    facilitation : float in (0, 1)
+        ``f``, the utilisation step per spike.
+
+    Raises
+    ------
+    InputError
+        For a value outside its range (stored as floats otherwise).
     """
-    out = []
-    for name, value in (("u0", u0), ("facilitation", facilitation)):
-        v = check_positive(name, value)
-        if v >= 1:
-            raise InputError(f"{name}: expected a number in (0, 1), got {value!r}")
-        out.append(v)
-    taus = []
-    for name, value in (("recovery_planes", recovery_planes), ("facilitation_planes", facilitation_planes)):
-        v = check_positive(name, value)
-        if v > MAX_TIME_CONSTANT_PLANES:
-            raise InputError(
-                f"{name}: expected a time constant in (0, {MAX_TIME_CONSTANT_PLANES:g}] planes, got {value!r}"
-            )
-        taus.append(v)
-    return out[0], taus[0], taus[1], out[1]
+
+    u0: float = U0
+    recovery_planes: float = RECOVERY_PLANES
+    facilitation_planes: float = FACILITATION_PLANES
+    facilitation: float = FACILITATION
+
+    def __post_init__(self) -> None:
+        for name in ("u0", "facilitation"):
+            value = getattr(self, name)
+            v = check_positive(name, value)
+            if v >= 1:
+                raise InputError(f"{name}: expected a number in (0, 1), got {value!r}")
+            object.__setattr__(self, name, v)
+        for name in ("recovery_planes", "facilitation_planes"):
+            value = getattr(self, name)
+            v = check_positive(name, value)
+            if v > MAX_TIME_CONSTANT_PLANES:
+                raise InputError(
+                    f"{name}: expected a time constant in (0, {MAX_TIME_CONSTANT_PLANES:g}] planes, got {value!r}"
+                )
+            object.__setattr__(self, name, v)
+
+
+#: The published parameters (Zheng et al. 2021).
+DEFAULT_PARAMS = STPParams()
+
+
+def _check_params(params: Any) -> STPParams:
+    if not isinstance(params, STPParams):
+        raise InputError(f"params: expected an STPParams, got {type(params).__name__}")
+    return params
 
 
 def _resolve_backend(backend: Any) -> str:
     """``"numba"`` or ``"numpy"`` for a requested backend (see :data:`BACKENDS`)."""
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if _kernels is not None and parallel_usable() else "numpy"
-    if backend == "numba" and _kernels is None:
-        raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
-    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
-    return backend if parallel_usable() else "numpy"
+    return resolve_backend(backend, compiled=_kernels is not None)
 
 
 def _step_inplace(
@@ -151,11 +174,7 @@ def stp_step(
     r_deficit: np.ndarray,
     u_excess: np.ndarray,
     isi_planes: np.ndarray | float,
-    *,
-    u0: float = U0,
-    recovery_planes: float = RECOVERY_PLANES,
-    facilitation_planes: float = FACILITATION_PLANES,
-    facilitation: float = FACILITATION,
+    params: STPParams = DEFAULT_PARAMS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The update at one spike, on the states' distances from rest.
 
@@ -167,14 +186,14 @@ def stp_step(
         ``v = u - u0`` before the spike.
     isi_planes : array or float, > 0
         Δ, the interval since the previous spike, in planes.
-    u0, recovery_planes, facilitation_planes, facilitation : float
+    params : STPParams
         ``u0``, ``D``, ``F`` and ``f`` of the model.
 
     Returns
     -------
     r_deficit, u_excess : float64 arrays, the states after the update (broadcast shape).
     """
-    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    p = _check_params(params)
     isi = np.asarray(isi_planes, dtype=np.float64)
     if isi.size and not (np.isfinite(isi).all() and (isi > 0).all()):
         raise InputError("isi_planes: expected finite intervals > 0 planes")
@@ -182,7 +201,8 @@ def stp_step(
         np.asarray(r_deficit, dtype=np.float64), np.asarray(u_excess, dtype=np.float64), isi
     )
     q, v = q.copy(), v.copy()
-    _step_inplace(q, v, np.exp(-isi / d), np.exp(-isi / big_f), u0, f, np.empty_like(q))
+    _step_inplace(q, v, np.exp(-isi / p.recovery_planes), np.exp(-isi / p.facilitation_planes), p.u0,
+                  p.facilitation, np.empty_like(q))
     return q, v
 
 
@@ -208,11 +228,7 @@ def _log1p_ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def stp_rates(
     r_deficit: np.ndarray,
     u_excess: np.ndarray,
-    *,
-    u0: float = U0,
-    recovery_planes: float = RECOVERY_PLANES,
-    facilitation_planes: float = FACILITATION_PLANES,
-    facilitation: float = FACILITATION,
+    params: STPParams = DEFAULT_PARAMS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Invert the steady state of each variable to a rate (spikes per plane).
 
@@ -222,7 +238,7 @@ def stp_rates(
         ``q = 1 - R``.
     u_excess : array float64, values in [0, 1 - u0)
         ``v = u - u0``.
-    u0, recovery_planes, facilitation_planes, facilitation : float
+    params : STPParams
         ``u0``, ``D``, ``F`` and ``f``.
 
     Returns
@@ -236,15 +252,15 @@ def stp_rates(
     InputError
         If a state lies outside its range (the model cannot reach it).
     """
-    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    p = _check_params(params)
     q = np.asarray(r_deficit, dtype=np.float64)
     v = np.asarray(u_excess, dtype=np.float64)
     q, v = np.broadcast_arrays(q, v)
     if q.size and not (np.isfinite(q).all() and (q >= 0).all() and (q < 1).all()):
         raise InputError("r_deficit: expected 1 - R in [0, 1)")
-    if v.size and not (np.isfinite(v).all() and (v >= 0).all() and (v < 1 - u0).all()):
-        raise InputError(f"u_excess: expected u - u0 in [0, {1 - u0})")
-    return _rates(q, v, u0, d, big_f, f)
+    if v.size and not (np.isfinite(v).all() and (v >= 0).all() and (v < 1 - p.u0).all()):
+        raise InputError(f"u_excess: expected u - u0 in [0, {1 - p.u0})")
+    return _rates(q, v, p)
 
 
 def _inverse_interval(tau: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -257,10 +273,9 @@ def _inverse_interval(tau: float, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return 1.0 / (tau * log_term)
 
 
-def _rates(
-    q: np.ndarray, v: np.ndarray, u0: float, d: float, big_f: float, f: float
-) -> tuple[np.ndarray, np.ndarray]:
+def _rates(q: np.ndarray, v: np.ndarray, p: STPParams) -> tuple[np.ndarray, np.ndarray]:
     """The two read-outs (see :func:`stp_rates`), 0 where a variable is at rest."""
+    u0, d, big_f, f = p.u0, p.recovery_planes, p.facilitation_planes, p.facilitation
     rate_r = np.zeros(q.shape)
     rate_u = np.zeros(v.shape)
     moved = q > 0
@@ -292,11 +307,8 @@ def _decay_tables(n: int, d: float, big_f: float) -> tuple[np.ndarray, np.ndarra
 def tfstp_state(
     planes: np.ndarray,
     key_plane: int,
+    params: STPParams = DEFAULT_PARAMS,
     *,
-    u0: float = U0,
-    recovery_planes: float = RECOVERY_PLANES,
-    facilitation_planes: float = FACILITATION_PLANES,
-    facilitation: float = FACILITATION,
     backend: str = "auto",
 ) -> tuple[np.ndarray, np.ndarray]:
     """The STP states at the key plane, from the spikes of planes ``0 .. key_plane``.
@@ -305,7 +317,7 @@ def tfstp_state(
     ----------
     planes : ndarray of bool, shape (T, H, W)
     key_plane : int in [0, T)
-    u0, recovery_planes, facilitation_planes, facilitation : float
+    params : STPParams
         ``u0``, ``D``, ``F`` and ``f``.
     backend : {"auto", "numba", "numpy"}
         ``"numba"``: the compiled per-pixel pass (:mod:`baselines.tfstp_kernels`); ``"numpy"``: the
@@ -319,13 +331,14 @@ def tfstp_state(
         spikes.
     """
     planes, key_plane = check_spike_window(planes, key_plane)
-    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    p = _check_params(params)
+    u0, f = p.u0, p.facilitation
     compiled = _resolve_backend(backend) == "numba"
     n = key_plane + 1
     h, w = planes.shape[1:]
     size = h * w
     flat = planes[:n].reshape(n, size)
-    decay_r, decay_u = _decay_tables(n, d, big_f)
+    decay_r, decay_u = _decay_tables(n, p.recovery_planes, p.facilitation_planes)
     if compiled:
         with KERNEL_LOCK:
             return _kernels.stp_states(np.ascontiguousarray(planes), n, decay_r, decay_u, u0, f)
@@ -365,11 +378,8 @@ def tfstp_state(
 def tfstp_rate(
     planes: np.ndarray,
     key_plane: int,
+    params: STPParams = DEFAULT_PARAMS,
     *,
-    u0: float = U0,
-    recovery_planes: float = RECOVERY_PLANES,
-    facilitation_planes: float = FACILITATION_PLANES,
-    facilitation: float = FACILITATION,
     backend: str = "auto",
 ) -> np.ndarray:
     """TFSTP's rate estimate at the key plane, from the two read-outs.
@@ -378,7 +388,7 @@ def tfstp_rate(
     ----------
     planes : ndarray of bool, shape (T, H, W)
     key_plane : int in [0, T)
-    u0, recovery_planes, facilitation_planes, facilitation : float
+    params : STPParams
         ``u0``, ``D``, ``F`` and ``f``.
     backend : {"auto", "numba", "numpy"}
         How the states are computed (see :func:`tfstp_state`; the same bits either way).
@@ -390,7 +400,8 @@ def tfstp_rate(
         (after an interval of more than ~745 D planes); 0 for pixels with fewer than two spikes up
         to the key plane.
     """
-    u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
+    p = _check_params(params)
+    u0, d, big_f, f = p.u0, p.recovery_planes, p.facilitation_planes, p.facilitation
     if _resolve_backend(backend) == "numba":  # states and read-out in one compiled pass
         planes, key_plane = check_spike_window(planes, key_plane)
         decay_r, decay_u = _decay_tables(key_plane + 1, d, big_f)
@@ -400,9 +411,8 @@ def tfstp_rate(
         if saturated:
             raise NeuSpikeError(_SATURATED)
         return rate
-    q, v = tfstp_state(planes, key_plane, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f,
-                       backend=backend)
-    rate_r, rate_u = _rates(q, v, u0, d, big_f, f)
+    q, v = tfstp_state(planes, key_plane, p, backend=backend)
+    rate_r, rate_u = _rates(q, v, p)
     rate = rate_r + rate_u
     rate[(rate_r > 0) & (rate_u > 0)] *= 0.5  # the mean where both moved, else the one that did
     return rate
@@ -435,21 +445,12 @@ class TFSTP(Method):
         facilitation_planes: float = FACILITATION_PLANES,
         facilitation: float = FACILITATION,
     ) -> None:
-        u0, d, big_f, f = check_stp_params(u0, recovery_planes, facilitation_planes, facilitation)
-        super().__init__(name, u0=u0, recovery_planes=d, facilitation_planes=big_f, facilitation=f)
-        self.u0, self.recovery_planes, self.facilitation_planes, self.facilitation = u0, d, big_f, f
+        self.stp = STPParams(u0, recovery_planes, facilitation_planes, facilitation)
+        super().__init__(name, **dataclasses.asdict(self.stp))
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
-        rate = tfstp_rate(
-            stream.planes,
-            sample.key_plane,
-            u0=self.u0,
-            recovery_planes=self.recovery_planes,
-            facilitation_planes=self.facilitation_planes,
-            facilitation=self.facilitation,
-        )
-        return rate_to_image(rate, stream.gain)
+        return rate_to_image(tfstp_rate(stream.planes, sample.key_plane, self.stp), stream.gain)
 
 
 def register_methods(register) -> None:
@@ -457,11 +458,6 @@ def register_methods(register) -> None:
     register(
         "tfstp",
         TFSTP,
-        params={
-            "u0": U0,
-            "recovery_planes": RECOVERY_PLANES,
-            "facilitation_planes": FACILITATION_PLANES,
-            "facilitation": FACILITATION,
-        },
+        params=dataclasses.asdict(DEFAULT_PARAMS),
         description="texture from short-term plasticity (Zheng et al. 2021), exact steady-state read-out",
     )

@@ -10,8 +10,11 @@ In each cell
 ------------
 1. The recording is simulated once, with only the modalities the sweep's methods consume, plus
    ``history_s`` seconds of event history when a recurrent method needs warm-up, and cached on disk,
-   by :func:`neuspike.simulate.simulate_recording` (the one way from a cell to a recording, shared
-   with the timing benchmark and the training datasets): same seed, same bytes.
+   by :func:`neuspike.simulation.cell.simulate_recording` (the one way from a cell to a recording, shared
+   with the timing benchmark and the training datasets): same seed, same bytes. Each modality is
+   cached on its own and serves any later sweep of the same cell (the events: one with the same
+   event history), so a method added to a finished sweep simulates nothing again. The static
+   region (where the scene never moves) comes with the recording.
 2. Every method reconstructs from that same recording, given without its ground truth. Before the
    timed call, a method's first use in a process is one untimed call on the same sample, so one-off
    costs (lazy imports, thread pools, first-call allocation) stay out of the timing. ``reset()``
@@ -40,18 +43,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 import torch
 
 from bench.grid import Cell
 from bench.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
-from neuspike.cache import RecordingCache
 from neuspike.errors import InputError
 from neuspike.jsonio import canonical_json
+from neuspike.parallel import set_threads
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
-from neuspike.simulate import Recording, SensorConfig, sample_rng, simulate_recording, static_region
+from neuspike.simulation.cache import RecordingCache
+from neuspike.simulation.cell import simulate_recording
+from neuspike.simulation.recording import Recording, SensorConfig
+from neuspike.simulation.window import sample_rng, static_region
 
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
@@ -105,7 +110,8 @@ class CellResult:
     ``rows`` are the tidy rows (:mod:`bench.results`); ``status`` is ``"error"`` when any method or
     the simulation failed; ``failures`` maps a method (or ``"simulation"``) to its traceback;
     ``skipped`` maps a method to the reason it could not run; ``cache_hit`` says whether the
-    recording came from the cache; ``threads`` is torch's thread count in the worker. With
+    recording came from the cache, all of it; ``simulated`` names the modalities simulated now;
+    ``threads`` is torch's thread count in the worker. With
     ``task.keep_images``, ``images`` maps ``"gt"`` and each method that succeeded to its float32
     (H, W) image in [0, 1] (the figure grid of the report).
     """
@@ -121,6 +127,7 @@ class CellResult:
     pid: int
     wall_seconds: float
     images: dict[str, np.ndarray] = field(default_factory=dict)
+    simulated: tuple[str, ...] = ()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -206,12 +213,7 @@ def prepare_worker(setup: WorkerSetup) -> int:
     """
     load_plugins(plugin_names(setup.plugins))
     if setup.threads is not None:
-        threads = int(setup.threads)
-        # numba first: starting its OpenMP threading layer resets the OpenMP pool size torch reads
-        if numba.get_num_threads() != min(threads, numba.config.NUMBA_NUM_THREADS):
-            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-        if torch.get_num_threads() != threads:
-            torch.set_num_threads(threads)
+        return set_threads(int(setup.threads))
     return int(torch.get_num_threads())
 
 
@@ -248,8 +250,8 @@ def cell_rng(cell: Cell) -> np.random.Generator:
     return sample_rng(cell.seed, cell.scene.spec, cell.condition)
 
 
-def simulate_cell(task: CellTask) -> tuple[Recording, bool]:
-    """The cell's recording, from the cache or simulated (then cached). Returns ``(recording, hit)``."""
+def simulate_cell(task: CellTask) -> tuple[Recording, frozenset[str]]:
+    """The cell's recording, from the cache or simulated (then cached). Returns ``(recording, modalities simulated now)``."""
     cell = task.cell
     return simulate_recording(cell.scene.spec, cell.condition, sensor=task.sensor, seed=cell.seed,
                               modalities=task.modalities, history_s=task.history_s,
@@ -341,12 +343,14 @@ def run_cell(task: CellTask) -> CellResult:
 
     recording = None
     cache_hit = False
+    simulated: frozenset[str] = frozenset()
     sim_seconds = float("nan")
     stage_names: list[tuple[str, str]] = []
     stage_json = ""
     if resolved:
         try:
-            recording, cache_hit = simulate_cell(task)
+            recording, simulated = simulate_cell(task)
+            cache_hit = not simulated
             stage_names, sim_seconds, stage_json = _stage_summary(recording.meta)
         except Exception as exc:
             failures["simulation"] = traceback.format_exc()
@@ -361,8 +365,10 @@ def run_cell(task: CellTask) -> CellResult:
         truth = full.ground_truth
         sample = full.without_ground_truth()
         try:  # where the scene never moves: the static-texture measure of the claims
-            static = static_region(cell.scene.spec, cell.condition, sensor=task.sensor, modalities=task.modalities,
-                                   history_s=task.history_s, min_fraction=STATIC_MIN_FRACTION)
+            static = recording.static_region()  # kept with the recording; rendered for older cache entries
+            if static is None:
+                static = static_region(cell.scene.spec, cell.condition, sensor=task.sensor, modalities=task.modalities,
+                                       history_s=task.history_s, min_fraction=STATIC_MIN_FRACTION)
         except Exception as exc:
             failures["static region"] = traceback.format_exc()
             static = None
@@ -406,4 +412,4 @@ def run_cell(task: CellTask) -> CellResult:
             rows.append(base_row(**row, metric=metric, value=float(values.get(metric, np.nan))))
     status = ERROR if failures else OK
     return CellResult(task.cell_id, rows, status, cache_hit, sim_seconds, failures, skipped, threads,
-                      os.getpid(), time.perf_counter() - t_start, images)
+                      os.getpid(), time.perf_counter() - t_start, images, tuple(sorted(simulated)))

@@ -29,6 +29,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Iterable, Iterator
 
+from neuspike.checks import check_positive_int
 from neuspike.errors import InputError
 
 EXECUTORS = ("local", "dask")
@@ -56,9 +57,7 @@ class LocalExecutor:
     name = "local"
 
     def __init__(self, workers: int = 1) -> None:
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise InputError(f"workers: expected a whole number >= 1, got {workers!r}")
-        self.workers = workers
+        self.workers = check_positive_int("workers", workers)
         self._pool: ProcessPoolExecutor | None = None
 
     def describe(self) -> dict[str, Any]:
@@ -101,10 +100,8 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, scheduler: str | None = None, workers: int = 1, processes: bool = True) -> None:
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise InputError(f"workers: expected a whole number >= 1, got {workers!r}")
         self.scheduler = scheduler
-        self.workers = workers
+        self.workers = check_positive_int("workers", workers)
         self.processes = processes
         self._client = None
         self._cluster = None

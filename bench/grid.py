@@ -128,10 +128,7 @@ def _check_size(size: Any) -> tuple[int, int]:
         w, h = size
     except (TypeError, ValueError):
         raise InputError(f"size: expected (width, height), got {size!r}") from None
-    for label, v in (("width", w), ("height", h)):
-        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-            raise InputError(f"size {label}: expected a whole number >= 1, got {v!r}")
-    return int(w), int(h)
+    return checks.check_size("size", w, h)
 
 
 @dataclass(frozen=True)
@@ -193,8 +190,7 @@ class Grid:
         if len(set(names)) != len(names):
             raise InputError(f"grid scenes repeat a name: {names}")
         for seed in self.seeds:
-            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-                raise InputError(f"grid seeds: expected whole numbers >= 0, got {seed!r}")
+            checks.check_int("grid seeds", seed, minimum=0, what="whole numbers")
         for noise in self.noises:
             if noise not in NOISE_LEVELS:
                 raise InputError(f"grid noise level {noise!r} is unknown; choose from {', '.join(NOISE_LEVELS)}")

@@ -53,6 +53,7 @@ import pandas as pd
 from bench import tables as tb
 from bench import timing
 from neuspike.errors import InputError
+from neuspike.parallel import set_threads
 
 WIDTH, HEIGHT = 400, 250
 REFERENCE_PLANES = 41
@@ -183,12 +184,7 @@ def thread_counts() -> dict[str, int]:
 
 def pin_threads(threads: int) -> dict[str, int]:
     """Set torch's intra-op pool and numba's pool to ``threads`` (numba: at most its launch count)."""
-    import numba
-    import torch
-
-    threads = timing.check_count("threads", threads, 1)
-    torch.set_num_threads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    set_threads(timing.check_count("threads", threads, 1))
     return thread_counts()
 
 

@@ -93,6 +93,39 @@ def machine() -> dict[str, Any]:
     }
 
 
+def portable_path(path: str | os.PathLike) -> str:
+    """``path`` as it can be written into a committed report: relative to the current folder where
+    it lies inside it or beside it (``../shared/weights``), else ``.../`` and its last two parts
+    (no absolute path of the machine that made the report)."""
+    text = os.fspath(path)
+    if not os.path.isabs(text):
+        return text
+    rel = os.path.relpath(text, Path.cwd())
+    if not rel.startswith(os.pardir + os.sep + os.pardir) and rel != os.pardir + os.sep + os.pardir:
+        return rel
+    parts = Path(text).parts
+    return os.path.join("...", *parts[-2:])
+
+
+def command_line(argv: list[str] | None = None) -> list[str]:
+    """The command that started this process, without the machine's paths: ``python -m MODULE`` and
+    the arguments, absolute paths among them (also in ``--opt=PATH``) made portable (:func:`portable_path`)."""
+    argv = list(sys.argv if argv is None else argv)
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None and spec.name:
+        head = ["python", "-m", spec.name.removesuffix(".__main__")]
+    else:
+        head = ["python", Path(argv[0]).name] if argv else ["python"]
+
+    def portable(arg: str) -> str:
+        name, eq, value = arg.partition("=")
+        if eq and name.startswith("--") and os.path.isabs(value):
+            return f"{name}={portable_path(value)}"
+        return portable_path(arg) if os.path.isabs(arg) else arg
+
+    return head + [portable(a) for a in argv[1:]]
+
+
 def collect(*, executor: dict[str, Any], threads_per_worker: int | None, start: str,
             contended: bool | None) -> dict[str, Any]:
     """Metadata of a run that starts now (``end`` is filled by :func:`finish`).
@@ -104,7 +137,7 @@ def collect(*, executor: dict[str, Any], threads_per_worker: int | None, start: 
         "source": source_state(),
         "versions": package_versions(),
         "machine": machine(),
-        "command": [sys.executable, *sys.argv],
+        "command": command_line(),
         "executor": executor,
         "threads_per_worker": threads_per_worker,
         "timing_contended": contended,

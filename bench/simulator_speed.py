@@ -35,7 +35,7 @@ import numpy as np
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.sensors.backends import NUMBA_AVAILABLE
+from neuspike.parallel import NUMBA_AVAILABLE
 from neuspike.sensors.event_camera import EventCamera
 from neuspike.sensors.spike_camera import SpikeCamera
 
@@ -179,7 +179,7 @@ def numpy_reference_paths() -> Iterator[None]:
     import neuspike.sensors.event_camera as event_camera
     import neuspike.sensors.spike_camera as spike_camera
 
-    def numpy_only(backend: str) -> str:
+    def numpy_only(backend: str, **_: object) -> str:
         return "numpy"
 
     with mock.patch.object(event_camera, "resolve_backend", numpy_only), \
@@ -192,7 +192,8 @@ def window_cases(sizes=WINDOW_SIZES) -> list[Case]:
     """One simulated window of the sweep's default cell per run, compiled and on the reference paths."""
     from bench.grid import DEFAULT_EFFECTS
     from neuspike.conditions import Condition
-    from neuspike.simulate import SensorConfig, simulate_sample
+    from neuspike.simulation.cell import simulate_sample
+    from neuspike.simulation.recording import SensorConfig
 
     condition = Condition(light=0.25, motion=128, effects=DEFAULT_EFFECTS)
     out = []

@@ -1,6 +1,7 @@
 """Time per frame of every method (the paper's Table 2): ``python -m bench.timing``.
 
-For each resolution (240x180, 346x260, 400x250, 640x480 by default) one representative recording is
+For each resolution (400x250 by default, the paper's four with ``--full``: 240x180, 346x260, 400x250,
+640x480) one representative recording is
 simulated once: the ``camera`` photograph panning (the sweeps' pan scene, scaled to the width) at
 L = 1/4, S = 128, 256 planes, both modalities, with the sweeps' default effects and
 ``--history-windows`` windows of event history for recurrent methods to warm up on. Every method
@@ -48,17 +49,20 @@ import pandas as pd
 
 from bench import grid as grids
 from bench import tables as tb
+from neuspike.checks import check_int
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
+from neuspike.parallel import set_threads
 from neuspike.sample import Sample
-from neuspike.simulate import DEFAULT_HISTORY_WINDOWS, SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS, SensorConfig
 from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
 
 #: Default resolutions (width, height): the paper's Table 2.
 RESOLUTIONS: tuple[tuple[int, int], ...] = tb.TABLE2_RESOLUTIONS
 #: Timed and warm-up calls: quick (the default) and full.
-QUICK = {"repeats": 3, "warmup": 1}
-FULL = {"repeats": 10, "warmup": 2}
+QUICK = {"repeats": 3, "warmup": 1, "sizes": ((400, 250),)}
+FULL = {"repeats": 10, "warmup": 2, "sizes": RESOLUTIONS}
 #: The representative condition.
 LIGHT, MOTION, PLANES = 0.25, 128, 256
 #: Result folders searched (newest first) for the accuracy-versus-time chart.
@@ -106,11 +110,13 @@ class TimingStats:
         return self.summary()["median_ms"]
 
 
+def _sizes_text(sizes: Iterable[tuple[int, int]]) -> str:
+    return ", ".join(f"{w}x{h}" for w, h in sizes)
+
+
 def check_count(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int when it is a whole number >= ``minimum``; else :class:`InputError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
-    return int(value)
+    return check_int(name, value, minimum=minimum)
 
 
 def time_callable(fn: Callable[[], Any], *, repeats: int, warmup: int, setup: Callable[[], Any] | None = None,
@@ -314,8 +320,8 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
                                            modalities=sorted(needs), seed=seed)
         for name in names:
             method, reason = created[name]
-            if threads is not None and torch.get_num_threads() != threads:
-                torch.set_num_threads(threads)
+            if threads is not None:
+                set_threads(threads)
             row: dict[str, Any] = {c: math.nan for c in TIMING_COLUMNS}
             row.update(method=name, resolution=res, width=width, height=height, threads=torch.get_num_threads(),
                        error="", **method_info(name, method))
@@ -397,24 +403,28 @@ def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m bench.timing",
-        description="Time per frame of every registered method at the paper's Table 2 resolutions (median and "
+        description="Time per frame of every registered method (median and "
         "spread after warm-up, torch threads recorded, learned parameter counts), beside the paper's published "
         "figures; and the accuracy-versus-time chart joined with the latest sweep results.",
         epilog="examples:\n"
-        "  python -m bench.timing                                   # quick: 5 timed calls per method and size\n"
+        f"  python -m bench.timing                                   # quick: {QUICK['repeats']} timed calls per method at "
+        f"{_sizes_text(QUICK['sizes'])}\n"
         "  python -m bench.timing --full --weights ../shared/weights/firenet\n"
         "  python -m bench.timing --methods tfp,tfi --sizes 400x250 --results runs/light\n\n"
+        "--full: the paper's Table 2 resolutions (" + _sizes_text(FULL["sizes"]) + ").\n"
         "recurrent methods (FireNet): ms per frame is one network step (one event voxel grid); the whole call,\n"
         "warm-up over the event history included, is in timing.csv (median_ms). Timings on a shared machine\n"
         "are noisy: min, max and quartiles are in timing.csv.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--methods", help="comma-separated registry names (default: every registered method)")
-    parser.add_argument("--sizes", help="comma-separated WxH (default: " + ",".join(f"{w}x{h}" for w, h in RESOLUTIONS) + ")")
+    parser.add_argument("--sizes", help=f"comma-separated WxH (default: {_sizes_text(QUICK['sizes'])}; "
+                                        f"with --full {_sizes_text(FULL['sizes'])})")
     mode = parser.add_mutually_exclusive_group()
     mode.add_argument("--quick", action="store_true", help=f"the default: {QUICK['repeats']} timed calls after "
-                      f"{QUICK['warmup']} warm-up call(s)")
-    mode.add_argument("--full", action="store_true", help=f"{FULL['repeats']} timed calls after {FULL['warmup']} warm-up calls")
+                      f"{QUICK['warmup']} warm-up call(s), at {_sizes_text(QUICK['sizes'])}")
+    mode.add_argument("--full", action="store_true", help=f"{FULL['repeats']} timed calls after {FULL['warmup']} warm-up "
+                      f"calls, at the paper's four resolutions")
     parser.add_argument("--repeats", type=int, help="timed calls per method and size (overrides --quick/--full)")
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
@@ -460,7 +470,7 @@ def run(args: argparse.Namespace) -> Path:
     import torch
 
     from neuspike.atomic import write_json, write_text
-    from bench.provenance import machine, now_iso, package_versions, source_state
+    from bench.provenance import command_line, machine, now_iso, package_versions, source_state
     from bench.report import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)
@@ -468,11 +478,11 @@ def run(args: argparse.Namespace) -> Path:
         origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
         raise InputError(f"{origin}: {str(weights)!r} is not a folder")
     if args.threads is not None:
-        torch.set_num_threads(check_count("--threads", args.threads, 1))
+        set_threads(check_count("--threads", args.threads, 1))
     preset = FULL if args.full else QUICK
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
-    sizes = parse_sizes(args.sizes) if args.sizes else RESOLUTIONS
+    sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     names = method_names(args.methods)
     from neuspike import methods as registry
 
@@ -503,7 +513,7 @@ def run(args: argparse.Namespace) -> Path:
                          "weights": str(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
-            "command": [sys.executable, *sys.argv], "executor": {"executor": "timing", "workers": 1},
+            "command": command_line(), "executor": {"executor": "timing", "workers": 1},
             "threads": torch.get_num_threads(), "timing_contended": False, "start": now_iso(), "end": None}
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()

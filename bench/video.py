@@ -50,6 +50,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
            "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "error")
@@ -82,7 +83,7 @@ def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
     from neuspike.conditions import Condition
     from neuspike.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import write_sequence
+    from neuspike.simulation.writing import write_sequence
 
     meta_path = folder / "meta.json"
     scene_spec = SceneSpec(kind="fan", size=(spec.width, spec.height), rpm=spec.rpm)
@@ -149,9 +150,7 @@ def _threads() -> int:
 
 def _apply_threads(spec: VideoBenchSpec) -> None:
     if spec.threads is not None:
-        import torch
-
-        torch.set_num_threads(spec.threads)
+        set_threads(spec.threads)
 
 
 def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder: Path) -> list[dict[str, Any]]:

@@ -57,12 +57,13 @@ def replacing(path: str | os.PathLike) -> Iterator[str]:
         raise
 
 
-def write_with(path: str | os.PathLike, write: Callable[[Any], Any]) -> Path:
+def write_with(path: str | os.PathLike, write: Callable[[Any], Any], *, parents: bool = True) -> Path:
     """Write a file atomically and durably: ``write(fileobj)`` fills a temporary file beside ``path``
-    (created with its parent folders), which is flushed to disk and then replaces ``path`` in one
-    step. A crash leaves either the old file or the new one."""
+    (its parent folders created first unless ``parents`` is False), which is flushed to disk and
+    then replaces ``path`` in one step. A crash leaves either the old file or the new one."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if parents:
+        path.parent.mkdir(parents=True, exist_ok=True)
     with replacing(path) as tmp, open(tmp, "wb") as f:
         write(f)
         f.flush()

@@ -53,13 +53,21 @@ def check_nonnegative(name: str, value: Any) -> float:
     return v
 
 
+def check_int(name: str, value: Any, *, minimum: int | None = None, what: str = "a whole number") -> int:
+    """Return ``value`` as an int, raising unless it is an integer (Python's or NumPy's; ``bool`` is
+    refused) and, where ``minimum`` is given, at least ``minimum``. ``what`` names the expected value
+    in the message (``"expected {what} >= {minimum}, got ..."``)."""
+    expected = what if minimum is None else f"{what} >= {minimum}"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"{name}: expected {expected}, got {value!r}")
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name}: expected {expected}, got {value!r}")
+    return int(value)
+
+
 def check_positive_int(name: str, value: Any) -> int:
     """Return ``value`` as an int, raising unless it is a whole number >= 1."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InputError(f"{name}: expected a whole number >= 1, got {value!r}")
-    if value < 1:
-        raise InputError(f"{name}: expected a whole number >= 1, got {value!r}")
-    return int(value)
+    return check_int(name, value, minimum=1)
 
 
 def check_size(name: str, width: Any, height: Any) -> tuple[int, int]:
@@ -88,8 +96,7 @@ def check_spike_window(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
         raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
     if planes.shape[0] < 1:
         raise InputError(f"planes: expected at least one plane, got shape {planes.shape}")
-    if isinstance(key_plane, (bool, np.bool_)) or not isinstance(key_plane, (int, np.integer)):
-        raise InputError(f"key_plane: expected an integer plane index, got {key_plane!r}")
+    key_plane = check_int("key_plane", key_plane, what="an integer plane index")
     if not 0 <= key_plane < planes.shape[0]:
         raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
     return planes, int(key_plane)

@@ -33,6 +33,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from neuspike.checks import check_int
 from neuspike.errors import InputError
 
 SPIKES = "spikes"
@@ -230,9 +231,7 @@ class Condition:
         if not np.isfinite(light) or light <= 0:
             raise InputError(f"light scale L must be a positive number, got {self.light!r}")
         object.__setattr__(self, "light", light)
-        if isinstance(self.motion, bool) or not isinstance(self.motion, (int, np.integer)) or self.motion < 1:
-            raise InputError(f"motion scale S must be a whole number >= 1, got {self.motion!r}")
-        object.__setattr__(self, "motion", int(self.motion))
+        object.__setattr__(self, "motion", check_int("motion scale S", self.motion, minimum=1))
         if self.noise not in NOISE_LEVELS:
             raise InputError(f"unknown noise level {self.noise!r}; choose one of {', '.join(NOISE_LEVELS)}")
         object.__setattr__(self, "effects", merge_effects(self.effects))

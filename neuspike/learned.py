@@ -3,10 +3,16 @@
 A learned method is a :class:`~neuspike.methods.Method` whose image comes from a torch module. The
 base owns what all of them share, written once:
 
-* **weights**: the registry entry declares the file's name (``register(..., weights="x.safetensors")``);
-  :func:`neuspike.methods.create` passes it with the user's ``weights_dir`` and the file is found by
-  :func:`neuspike.weights.resolve_weights` (the user's folder first, then the weights shipped in the
-  package). Loading is strict (:func:`neuspike.weights.load_state_strict`); our own weights are
+* **weights**: the registry entry carries the weights configuration
+  (:class:`neuspike.methods.WeightsConfig`: the file's name and the sub-folders of a user's folder
+  to look in); :func:`neuspike.methods.create` passes it with the user's ``weights_dir`` and the
+  file is found by :func:`neuspike.weights.resolve_weights` (the user's folder first, then the
+  weights shipped in the package). The constructor builds the module first
+  (:meth:`LearnedMethod.build_module`, from the parameters alone), then loads the file into it
+  (:meth:`LearnedMethod.load_weights`, a function of the module and the path that returns the
+  layout it read), so no subclass has to prepare attributes before the base's ``__init__``.
+  Loading is strict (:func:`neuspike.weights.load_state_strict`); a file whose sha256 differs from
+  its card's is warned about (:func:`neuspike.weights.check_card`). Our own weights are
   safetensors, published ``.pt`` files are read weights-only by the subclass that needs them.
 * **device**: ``"cpu"`` by default; any torch device string the machine has (``"cuda"``,
   ``"cuda:1"``) when asked for. Nothing is ever placed on a GPU unasked.
@@ -22,7 +28,8 @@ base owns what all of them share, written once:
   :meth:`LearnedMethod.to_image` (default: clamp), and its label goes to ``last_normalisation``.
 
 Subclasses implement :meth:`build_module` and :meth:`encode`, and may override :meth:`load_weights`
-and :meth:`to_image`.
+and :meth:`to_image`. The same two give training (:mod:`neuspike.train`): :meth:`for_training`
+builds the method around a fresh module, and the trainer feeds it what :meth:`encode` returns.
 """
 
 from __future__ import annotations
@@ -40,7 +47,7 @@ from torch import nn
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample
-from neuspike.weights import file_sha256, load_safetensors, load_state_strict, resolve_weights
+from neuspike.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
 
 __all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision"]
 
@@ -103,6 +110,8 @@ class LearnedMethod(Method):
         module (:meth:`for_training`).
     weights_dir : path or None
         Folder the user named; ``None`` looks only at the weights shipped in the package.
+    weights_subdirs : sequence of str
+        Sub-folders of ``weights_dir`` tried first (from the registry entry's weights configuration).
     device : str or torch.device
         Where the module runs (default ``"cpu"``).
     precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
@@ -119,27 +128,29 @@ class LearnedMethod(Method):
         When the file does not fit the module (missing, unused or mis-shaped tensors, truncation).
     """
 
-    #: Sub-folders of a user's weights folder tried before the folder itself.
-    weights_subdirs: ClassVar[tuple[str, ...]] = ()
     #: Label of :meth:`to_image`'s read-out.
     output_label: ClassVar[str] = CLAMP
 
-    def __init__(self, name: str | None = None, *, weights_file: str | None,
-                 weights_dir: str | os.PathLike | None = None, device: str | torch.device = "cpu",
-                 precision: str = "auto", **params: Any) -> None:
+    def __init__(self, name: str | None = None, *, weights_file: str | None = None,
+                 weights_dir: str | os.PathLike | None = None, weights_subdirs: Sequence[str] = (),
+                 device: str | torch.device = "cpu", precision: str = "auto", **params: Any) -> None:
         dev = resolve_device(device)
         precision = resolve_precision(precision, dev)
         path = None if weights_file is None else resolve_weights(str(weights_file), weights_dir,
-                                                                  subdirs=self.weights_subdirs)
+                                                                  subdirs=tuple(weights_subdirs))
         super().__init__(name, weights_file=weights_file, precision=precision, **params)
         self.device = dev
         self.weights_path: Path | None = path
-        self.weights_sha256: str | None = None if path is None else file_sha256(path)
-        module = self.build_module()
-        if path is not None:
-            self.load_weights(module, path)
-        self.module: nn.Module = module.to(dev).eval()
+        self.weights_sha256: str | None = None
+        #: The layout the weights file was read in (``load_weights``' answer; ``None`` without weights).
+        self.weights_layout: str | None = None
         self._state: Any = None
+        module = self.build_module()  # every attribute above is set: the hooks may use any of them
+        if path is not None:
+            self.weights_sha256 = file_sha256(path)
+            check_card(path, self.weights_sha256)
+            self.weights_layout = self.load_weights(module, path)
+        self.module: nn.Module = module.to(dev).eval()
 
     @classmethod
     def for_training(cls, name: str | None = None, *, device: str | torch.device = "cpu",
@@ -147,7 +158,8 @@ class LearnedMethod(Method):
         """The method around a fresh, untrained module (no weights file): what a trainer encodes and trains.
 
         ``params`` are the registry entry's own; precision is float32 (a trainer chooses its own
-        autocast). The module is left in eval mode: call ``method.module.train()`` to train it.
+        autocast). The module's initial weights come from torch's global generator (the trainer
+        seeds it). The module is left in eval mode: call ``method.module.train()`` to train it.
         """
         return cls(name, weights_file=None, device=device, precision="float32", **params)
 
@@ -161,9 +173,11 @@ class LearnedMethod(Method):
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """The module's inputs for ``sample``: a list of steps, each a tuple of (1, C, H, W) CPU tensors."""
 
-    def load_weights(self, module: nn.Module, path: Path) -> None:
-        """Load ``path`` into ``module`` strictly (default: a safetensors file of our own)."""
+    def load_weights(self, module: nn.Module, path: Path) -> str | None:
+        """Load ``path`` into ``module`` strictly and return the layout read (default: a safetensors
+        file of our own, ``"safetensors"``)."""
         load_state_strict(module, load_safetensors(path), str(path))
+        return "safetensors"
 
     def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:
         """The module's output (1, 1, H', W') as float32 (H, W) in [0, 1] (default: clamp, crop to the sample)."""

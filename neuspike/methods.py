@@ -8,9 +8,12 @@ divided out, ``"robust-p99"`` when it was not known); :meth:`Method.reconstruct`
 and the output and records the label in ``last_normalisation``.
 
 Variants are registry entries over one implementation: ``register("tfp-w8", TFP, params={"window": 8})``.
-A learned method's entry declares its weights file (``register(..., weights="x.safetensors")``);
-:func:`create` then passes that file name, the user's ``weights_dir`` and the ``device`` to the
-factory (:class:`neuspike.learned.LearnedMethod`). Nothing here reads the environment.
+A learned method's entry carries its weights configuration (:class:`WeightsConfig`: the file name
+and the sub-folders of a user's weights folder to look in; ``register(..., weights="x.safetensors")``
+is short for ``weights=WeightsConfig("x.safetensors")``); :func:`create` passes it, the user's
+``weights_dir`` and the ``device`` to the factory (:class:`neuspike.learned.LearnedMethod`), which
+builds the module, then :mod:`neuspike.weights` resolves and loads the file into it. Nothing here
+reads the environment.
 
 One registration contract for everything: a module, an entry point of the group ``neuspike.methods``
 or a ``--plugin`` file provides ``register_methods(register)``, a callable that receives
@@ -135,6 +138,23 @@ class Method(abc.ABC):
 
 
 @dataclass(frozen=True)
+class WeightsConfig:
+    """Where a learned method's weights come from (the registry entry's part; timm's ``pretrained_cfg``).
+
+    ``file``: the file's name; ``subdirs``: sub-folders of the user's weights folder tried before the
+    folder itself (e.g. ``("firenet",)``); the weights shipped in the package are tried last.
+    """
+
+    file: str
+    subdirs: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.file, str) or not self.file.strip():
+            raise InputError(f"weights: expected a file name, got {self.file!r}")
+        object.__setattr__(self, "subdirs", tuple(self.subdirs))
+
+
+@dataclass(frozen=True)
 class MethodEntry:
     """A registry entry: a factory (usually a Method subclass) and the parameters of this variant."""
 
@@ -143,8 +163,8 @@ class MethodEntry:
     params: Mapping[str, Any] = field(default_factory=dict)
     inputs: frozenset[str] = frozenset()
     description: str = ""
-    #: File name of a learned method's weights (``None`` for classical methods).
-    weights: str | None = None
+    #: A learned method's weights configuration (``None`` for classical methods).
+    weights: WeightsConfig | None = None
 
 
 _REGISTRY: dict[str, MethodEntry] = {}
@@ -159,11 +179,12 @@ def register(
     params: Mapping[str, Any] | None = None,
     inputs: frozenset[str] | set[str] | None = None,
     description: str = "",
-    weights: str | None = None,
+    weights: str | WeightsConfig | None = None,
 ) -> MethodEntry:
     """Add a method (or a variant of one) to the registry.
 
-    ``weights`` names a learned method's weights file; :func:`create` resolves it.
+    ``weights``: a learned method's weights configuration, or only its file name; :func:`create`
+    passes it to the factory, which resolves and loads it.
 
     Raises
     ------
@@ -175,8 +196,10 @@ def register(
     ins = frozenset(inputs if inputs is not None else getattr(factory, "inputs", frozenset()))
     if not ins or not ins <= {"spikes", "events"}:
         raise InputError(f"method {name!r}: inputs must be a non-empty subset of {{'spikes', 'events'}}, got {sorted(ins)}")
-    if weights is not None and (not isinstance(weights, str) or not weights.strip()):
-        raise InputError(f"method {name!r}: weights must be a file name, got {weights!r}")
+    if isinstance(weights, str) and weights.strip():
+        weights = WeightsConfig(weights)
+    elif weights is not None and not isinstance(weights, WeightsConfig):
+        raise InputError(f"method {name!r}: weights must be a file name or a WeightsConfig, got {weights!r}")
     entry = MethodEntry(name, factory, MappingProxyType(dict(params or {})), ins, description, weights)
     with _LOCK:
         if name in _REGISTRY:
@@ -242,8 +265,10 @@ def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: s
     e = entry(name)
     params = {**e.params, **overrides}
     if e.weights is not None:
-        params.setdefault("weights_file", e.weights)
+        params.setdefault("weights_file", e.weights.file)
         params.update(weights_dir=weights_dir, device=device)
+        if e.weights.subdirs:
+            params["weights_subdirs"] = e.weights.subdirs
     method = e.factory(name=name, **params)
     if not isinstance(method, Method):
         raise NeuSpikeError(f"factory of {name!r} returned {type(method).__name__}, not a Method")

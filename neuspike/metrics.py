@@ -304,7 +304,7 @@ def static_texture(image: Any, reference: Any, static: Any, *, data_range: float
     ----------
     image, reference : array (H, W), real, values in [0, data_range]
     static : array (H, W) of bool
-        Pixels that do not change during the recording (:func:`neuspike.simulate.static_region`).
+        Pixels that do not change during the recording (:func:`neuspike.simulation.window.static_region`).
     data_range : float, keyword-only, required
 
     Returns

@@ -1,4 +1,9 @@
-"""Guards for numba's parallel kernels: one launch at a time, none where the runtime cannot start one.
+"""Which implementation runs (compiled numba kernels or a reference path), and guards for numba's
+parallel kernels: one launch at a time, none where the runtime cannot start one.
+
+Every module with compiled kernels resolves its ``backend`` argument through
+:func:`resolve_backend`: ``"auto"`` takes the kernels where they can run, ``"numba"`` asks for them,
+and the module's reference path (``"numpy"``, or ``"torch"`` for SNM) is the fallback.
 
 Two facts of numba's threading layers that every compiled kernel with ``prange`` must respect:
 
@@ -14,10 +19,19 @@ Two facts of numba's threading layers that every compiled kernel with ``prange``
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import threading
+from typing import Any
 
-__all__ = ["KERNEL_LOCK", "parallel_usable"]
+from neuspike.checks import check_positive_int
+from neuspike.errors import InputError
+
+__all__ = ["KERNEL_LOCK", "NUMBA_AVAILABLE", "parallel_usable", "resolve_backend", "set_threads"]
+
+#: Whether numba is installed (a dependency, but every stage must still run where it is not). Found
+#: without importing it, so that importing this module stays cheap.
+NUMBA_AVAILABLE: bool = importlib.util.find_spec("numba") is not None
 
 #: Held around every parallel kernel launch (numba's workqueue layer is not reentrant).
 KERNEL_LOCK = threading.RLock()
@@ -55,3 +69,56 @@ def parallel_usable() -> bool:
     """Whether a numba parallel kernel can run in this process (False in a child forked after a
     GNU OpenMP parallel region ran in its parent)."""
     return not _forked_after_parallel
+
+
+def resolve_backend(backend: Any, *, compiled: bool | None = None, reference: str = "numpy") -> str:
+    """``"numba"`` or ``reference`` for a requested backend.
+
+    Parameters
+    ----------
+    backend : {"auto", "numba", reference}
+        ``"auto"``: the compiled kernels where they can run, else the reference path.
+    compiled : bool, optional
+        Whether the caller's compiled kernels could be imported (default: whether numba can).
+    reference : str
+        The name of the caller's reference path (``"numpy"``; SNM's is ``"torch"``).
+
+    A child forked after a GNU OpenMP parallel region cannot start one (:func:`parallel_usable`):
+    there the reference runs even when ``"numba"`` was asked for (both give the same results).
+
+    Raises
+    ------
+    InputError
+        For an unknown name, or ``"numba"`` requested where the kernels cannot be imported.
+    """
+    choices = ("auto", "numba", reference)
+    if not isinstance(backend, str) or backend not in choices:
+        raise InputError(f"backend: expected one of {choices}, got {backend!r}")
+    available = NUMBA_AVAILABLE if compiled is None else compiled
+    if backend == "numba" and not available:
+        raise InputError(f"backend 'numba': numba cannot be imported here; use backend={reference!r} or 'auto'")
+    if backend == reference or not available or not parallel_usable():
+        return reference
+    return "numba"
+
+
+def set_threads(threads: int) -> int:
+    """Give numba's pool and torch's intra-op pool ``threads`` threads each (numba: at most the
+    count it was started with); return torch's count.
+
+    The one place that pins threads, in one order: numba first, because starting its OpenMP
+    threading layer resets the OpenMP pool size that torch reads. A pool already at the count is
+    left alone (setting numba's is not free once its layer runs).
+    """
+    threads = check_positive_int("threads", threads)
+    if NUMBA_AVAILABLE:
+        import numba
+
+        wanted = min(threads, numba.config.NUMBA_NUM_THREADS)
+        if numba.get_num_threads() != wanted:
+            numba.set_num_threads(wanted)
+    import torch
+
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+    return int(torch.get_num_threads())

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.errors import InputError
+from neuspike.checks import check_int
 
 
 def _spawn_key(keys: tuple[Any, ...]) -> tuple[int, ...]:
@@ -29,6 +29,5 @@ def derive_rng(seed: int, *keys: Any) -> np.random.Generator:
     The same ``(seed, keys)`` always gives the same stream; different keys give statistically
     independent streams.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
-    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=_spawn_key(keys)))
+    seed = check_int("seed", seed, minimum=0)
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=_spawn_key(keys)))

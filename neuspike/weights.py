@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -37,6 +38,8 @@ from neuspike.methods import MethodUnavailable
 
 __all__ = [
     "PACKAGE_WEIGHTS",
+    "WeightsMismatch",
+    "check_card",
     "WEIGHTS_ENV",
     "WeightsNotFound",
     "file_sha256",
@@ -61,6 +64,23 @@ class WeightsNotFound(MethodUnavailable):
         self.tried = tuple(tried)
         where = ", ".join(str(p) for p in self.tried) or "nowhere (no folder given)"
         super().__init__(f"weights {file_name} not found; looked in: {where}" + (f". {hint}" if hint else ""))
+
+
+class WeightsMismatch(UserWarning):
+    """A weights file whose sha256 is not the one its JSON card records (changed after export)."""
+
+
+def check_card(path: str | os.PathLike, sha256: str) -> None:
+    """Warn (:class:`WeightsMismatch`) when the card beside ``path`` records another sha256 than ``sha256``.
+
+    A file without a card (published ``.pt`` weights) or a card without ``sha256`` passes.
+    """
+    card = read_card(path)
+    recorded = (card or {}).get("sha256")
+    if recorded is not None and recorded != sha256:
+        warnings.warn(f"{path}: sha256 {sha256[:12]}... differs from its card's {str(recorded)[:12]}...; "
+                      "the file changed after it was exported (its card no longer describes it)",
+                      WeightsMismatch, stacklevel=3)
 
 
 def resolve_weights(file_name: str, weights_dir: str | os.PathLike | None, *,

@@ -55,7 +55,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.atomic import publish, replacing, temp_beside
 from neuspike.checks import check_positive_int
 from neuspike.errors import FormatError, InputError, NeuSpikeError, SourceError
 from neuspike.formats._npz import NpzArchive
@@ -557,24 +557,13 @@ def _check_stream(stream: Any, where: str) -> EventStream:
     return stream
 
 
-def _temp_path(path: Path) -> Path:
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    return Path(name)
-
-
 def _atomic(path: str | os.PathLike, write) -> Path:
     """Run ``write(temp_path)`` then move the temporary file onto ``path``; no partial files."""
     target = Path(path)
     if not target.parent.is_dir():
         raise SourceError(f"cannot write {target}: folder {target.parent} does not exist")
-    tmp = _temp_path(target)
-    try:
-        write(tmp)
-        publish(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with replacing(target) as tmp:
+        write(Path(tmp))
     return target
 
 
@@ -679,7 +668,9 @@ class EventsH5Writer:
         chunk = check_positive_int("chunk_events", chunk_events)
         if not self.path.parent.is_dir():
             raise SourceError(f"cannot write {self.path}: folder {self.path.parent} does not exist")
-        self._tmp = _temp_path(self.path)
+        fd, tmp = temp_beside(self.path)
+        os.close(fd)
+        self._tmp = Path(tmp)
         self._file = h5py.File(self._tmp, "w")
         g = self._file.create_group("events")
         self._sets = {

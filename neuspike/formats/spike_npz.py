@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.atomic import write_with
 from neuspike.checks import check_positive
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats._npz import NpzArchive
@@ -215,15 +214,4 @@ def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
         arrays["gain"] = np.float64(stream.gain)
     if stream.threshold is not None:
         arrays["threshold"] = np.float64(stream.threshold)
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        publish(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return target
+    return write_with(path, lambda f: np.savez_compressed(f, **arrays), parents=False)

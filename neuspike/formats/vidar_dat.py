@@ -16,14 +16,13 @@ rename it into place only when everything was written, so a failure leaves no pa
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.atomic import publish, temp_beside
+from neuspike.checks import check_int, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
@@ -105,7 +104,7 @@ class DatWriter:
 
     def __init__(self, path: str | os.PathLike) -> None:
         self._path = Path(path)
-        fd, tmp = tempfile.mkstemp(dir=self._path.parent, prefix=f".{self._path.name}.", suffix=".tmp")
+        fd, tmp = temp_beside(self._path)
         self._tmp = Path(tmp)
         self._file = os.fdopen(fd, "wb")
         self._shape: tuple[int, int] | None = None
@@ -315,8 +314,7 @@ def read_dat(
     for name, value in (("start", start), ("stop", stop)):
         if value is None and name == "stop":
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise InputError(f"{name}: expected a whole plane index, got {value!r}")
+        check_int(name, value, what="a whole plane index")
     first = int(start)
     last = total if stop is None else int(stop)
     if not 0 <= first <= last <= total:

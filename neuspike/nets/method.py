@@ -1,9 +1,8 @@
 """NeuSpike-Net behind the method interface: ``neuspike-net`` (spikes + events) and ``neuspike-net-spike``.
 
-The class also offers what the trainer needs without any weights (the training protocol of
-:mod:`neuspike.train`): :meth:`NeuSpikeNetMethod.module_for` builds an untrained module from a
-variant's parameters and :meth:`NeuSpikeNetMethod.encode_sample` turns a sample into the module's
-input tensors.
+It trains as every learned method does (:mod:`neuspike.train`): ``for_training()`` builds the
+untrained module (:meth:`NeuSpikeNetMethod.build_module`) and :meth:`NeuSpikeNetMethod.encode`
+turns a sample into the module's input tensors.
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from neuspike.nets.network import NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
                                            spike_gain, spike_representation)
 from neuspike.sample import Sample
-from neuspike.weights import load_safetensors, load_state_strict, read_card
+from neuspike.weights import read_card
 
 __all__ = ["ARCHITECTURE_PARAMS", "NeuSpikeNetMethod"]
 
@@ -74,43 +73,33 @@ class NeuSpikeNetMethod(LearnedMethod):
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), **learned)
 
-    # -- the training protocol (no weights needed) ------------------------------------------------
+    # -- LearnedMethod ----------------------------------------------------------------------------
 
-    @classmethod
-    def module_for(cls, params: Mapping[str, Any]) -> nn.Module:
-        """An untrained module for the variant ``params``."""
-        p = _check_params(params)
+    def build_module(self) -> nn.Module:
+        """An untrained module for this variant."""
+        p = self.params
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
-                           event_skip_weight=float(params.get("event_skip_weight", 1.0)))
+                           event_skip_weight=float(p.get("event_skip_weight", 1.0)))
 
-    @classmethod
-    def encode_sample(cls, sample: Sample, params: Mapping[str, Any]) -> tuple[torch.Tensor, ...]:
-        """The module's inputs for ``sample``: (spikes,) or (spikes, events), each float32 (1, 32, H, W).
+    def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
+        """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W).
 
         Raises
         ------
         InputError
             When the sample lacks spikes, or lacks events for the fusion network.
         """
-        p = _check_params(params)
+        p = self.params
         if sample.spikes is None:
             raise InputError("neuspike-net: the sample has no spikes")
         x_t = torch.from_numpy(spike_representation(sample, p["spike_representation"]))[None]
         if p["spike_only"]:
-            return (x_t,)
+            return [(x_t,)]
         if sample.events is None:
             raise InputError("neuspike-net: the sample has no events; the fusion network needs spikes and events "
                              "(neuspike-net-spike takes spikes alone)")
         x_m = torch.from_numpy(event_representation(sample, p["event_representation"]))[None]
-        return (x_t, x_m)
-
-    # -- LearnedMethod ----------------------------------------------------------------------------
-
-    def build_module(self) -> nn.Module:
-        return self.module_for(self.params)
-
-    def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
-        return [self.encode_sample(sample, self.params)]
+        return [(x_t, x_m)]
 
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)
@@ -118,7 +107,8 @@ class NeuSpikeNetMethod(LearnedMethod):
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label
 
-    def load_weights(self, module: nn.Module, path: Path) -> None:
+    def load_weights(self, module: nn.Module, path: Path) -> str | None:
+        """Our own safetensors, refused when its card says it was trained for another design."""
         card = read_card(path)
         trained = (card or {}).get("model", {}).get("params")
         if trained is not None:
@@ -126,4 +116,4 @@ class NeuSpikeNetMethod(LearnedMethod):
             theirs = {k: trained.get(k) for k in ARCHITECTURE_PARAMS}
             if ours != theirs:
                 raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")
-        load_state_strict(module, load_safetensors(path), str(path))
+        return super().load_weights(module, path)

@@ -7,34 +7,61 @@ Photographs come from scikit-image's bundled images (:data:`BUNDLED_PHOTOS`, spl
 :data:`TRAIN_PHOTOS` and :data:`TEST_PHOTOS`) or from any image file.
 """
 
-from neuspike.scenes.fan import FAN_HUB_FRACTION, FAN_TIP_FRACTION, FanScene, fan_phase
-from neuspike.scenes.pan import PanScene, pan_offsets
-from neuspike.scenes.photos import (
-    BUNDLED_PHOTOS,
-    IMAGE_SUFFIXES,
-    TEST_PHOTOS,
-    TRAIN_PHOTOS,
-    cover,
-    cover_size,
-    load_photo,
-    luma,
-    read_image_file,
-    read_photo,
-)
-from neuspike.scenes.radiance import luma_to_radiance
-from neuspike.scenes.sampling import mirror_index, sample_separable
-from neuspike.scenes.make import BUILDERS, make_scene
-from neuspike.scenes.scene import Scene, check_times
-from neuspike.scenes.spec import CROP_KINDS, DEFAULT_FOLDER_FPS, DEFAULT_SIZE, KINDS, MAX_ZOOM_EXPONENT, SceneSpec
-from neuspike.scenes.still import StillScene
-from neuspike.scenes.video import VideoScene, read_timestamps, read_video_source
-from neuspike.scenes.zoom import ZoomScene, zoom_coordinates
+# Names resolve on first use (PEP 562), so that ``from neuspike.scenes import SceneSpec`` does not
+# import OpenCV and torch (the video scene's) into a command that only parses its arguments.
+import importlib
+from typing import Any
 
-__all__ = [
-    "BUNDLED_PHOTOS", "DEFAULT_FOLDER_FPS", "DEFAULT_SIZE", "FAN_HUB_FRACTION", "FAN_TIP_FRACTION",
-    "CROP_KINDS", "IMAGE_SUFFIXES", "KINDS", "MAX_ZOOM_EXPONENT", "TEST_PHOTOS", "TRAIN_PHOTOS",
-    "FanScene", "PanScene", "Scene", "SceneSpec", "StillScene", "VideoScene", "ZoomScene",
-    "check_times", "cover", "cover_size", "fan_phase", "load_photo", "luma", "luma_to_radiance",
-    "make_scene", "mirror_index", "pan_offsets", "read_image_file", "read_photo",
-    "read_timestamps", "read_video_source", "sample_separable", "zoom_coordinates",
-]
+_EXPORTS = {
+    "BUILDERS": "neuspike.scenes.make",
+    "BUNDLED_PHOTOS": "neuspike.scenes.photos",
+    "CROP_KINDS": "neuspike.scenes.spec",
+    "DEFAULT_FOLDER_FPS": "neuspike.scenes.spec",
+    "DEFAULT_SIZE": "neuspike.scenes.spec",
+    "FAN_HUB_FRACTION": "neuspike.scenes.fan",
+    "FAN_TIP_FRACTION": "neuspike.scenes.fan",
+    "FanScene": "neuspike.scenes.fan",
+    "IMAGE_SUFFIXES": "neuspike.scenes.photos",
+    "KINDS": "neuspike.scenes.spec",
+    "MAX_ZOOM_EXPONENT": "neuspike.scenes.spec",
+    "PanScene": "neuspike.scenes.pan",
+    "Scene": "neuspike.scenes.scene",
+    "SceneSpec": "neuspike.scenes.spec",
+    "StillScene": "neuspike.scenes.still",
+    "TEST_PHOTOS": "neuspike.scenes.photos",
+    "TRAIN_PHOTOS": "neuspike.scenes.photos",
+    "VideoScene": "neuspike.scenes.video",
+    "ZoomScene": "neuspike.scenes.zoom",
+    "check_times": "neuspike.scenes.scene",
+    "cover": "neuspike.scenes.photos",
+    "cover_size": "neuspike.scenes.photos",
+    "fan_phase": "neuspike.scenes.fan",
+    "load_photo": "neuspike.scenes.photos",
+    "luma": "neuspike.scenes.photos",
+    "luma_to_radiance": "neuspike.scenes.radiance",
+    "make_scene": "neuspike.scenes.make",
+    "mirror_index": "neuspike.scenes.sampling",
+    "pan_offsets": "neuspike.scenes.pan",
+    "read_image_file": "neuspike.scenes.photos",
+    "read_photo": "neuspike.scenes.photos",
+    "read_timestamps": "neuspike.scenes.video",
+    "read_video_source": "neuspike.scenes.video",
+    "sample_separable": "neuspike.scenes.sampling",
+    "zoom_coordinates": "neuspike.scenes.zoom",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'neuspike.scenes' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.errors import InputError
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.parallel import KERNEL_LOCK, resolve_backend
 
 try:  # numba is a dependency, but scenes must still render where it cannot be imported
     from neuspike.scenes import sampling_kernels as _kernels
@@ -26,12 +26,7 @@ BACKENDS: tuple[str, ...] = ("auto", "numba", "numpy")
 
 
 def _compiled(backend: str) -> bool:
-    if backend not in BACKENDS:
-        raise InputError(f"backend: expected one of {BACKENDS}, got {backend!r}")
-    if backend == "numba" and _kernels is None:
-        raise InputError("backend 'numba': numba cannot be imported here; use backend='numpy' or 'auto'")
-    # a child forked after an OpenMP parallel region cannot start one: the reference runs there
-    return backend != "numpy" and _kernels is not None and parallel_usable()
+    return resolve_backend(backend, compiled=_kernels is not None) == "numba"
 
 #: Largest sample coordinate (pixels) accepted: beyond it float64 loses sub-pixel precision.
 MAX_COORDINATE_PX: float = 2.0**40

@@ -44,7 +44,7 @@ from neuspike.checks import check_ndim, check_nonnegative, check_positive, check
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
 from neuspike.parallel import KERNEL_LOCK, parallel_usable
-from neuspike.sensors.backends import resolve_backend
+from neuspike.parallel import resolve_backend
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = [

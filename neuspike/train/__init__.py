@@ -1,20 +1,28 @@
 """Training learned methods on simulated data: ``python -m neuspike.train NAME``.
 
-* :mod:`neuspike.train.spec` — the frozen :class:`TrainSpec` (saved as JSON beside the checkpoint);
-* :mod:`neuspike.train.data` — cells from (seed, split, index), the simulated shard, augmentation;
-* :mod:`neuspike.train.loop` — loss, schedule, validation, atomic checkpoints, resume, export.
+One system for every learned method (:class:`~neuspike.learned.LearnedMethod`): the method offers
+``for_training()`` (a fresh module), ``build_module()`` and ``encode(sample)``; the trainer does the
+rest.
 
-The training protocol a method class offers: ``module_for(params)`` (an untrained module) and
-``encode_sample(sample, params)`` (the module's input tensors, each (1, C, H, W)).
+* :mod:`neuspike.train.spec` — the frozen :class:`TrainSpec` with its data section
+  (:class:`WindowData` or :class:`SequenceData`) and the learning-rate schedule;
+* :mod:`neuspike.train.windows` — single windows: cells, the shard, augmentation, loss, validation;
+* :mod:`neuspike.train.sequences` — sequences of event windows: cells, items with exact flow, the
+  shard, batches, the temporal loss, validation;
+* :mod:`neuspike.train.checkpoint` — the run folder: spec file, checkpoint (the earlier trainers'
+  read too), log, exported weights and their card;
+* :mod:`neuspike.train.loop` — the one loop: schedule, steps, validation, export, resume.
+
+This package's ``__init__`` imports nothing heavy (the command's ``--help`` stays fast).
 """
 
-from neuspike.train.spec import KIND_WEIGHTS, TrainSpec, load_spec
+from neuspike.train.spec import KIND_WEIGHTS, SequenceData, TrainSpec, WindowData, learning_rate, load_spec
 
-__all__ = ["KIND_WEIGHTS", "TrainSpec", "load_spec", "train"]
+__all__ = ["KIND_WEIGHTS", "SequenceData", "TrainSpec", "WindowData", "learning_rate", "load_spec", "train"]
 
 
-def train(spec: TrainSpec, *, quiet: bool = False):
+def train(spec: TrainSpec, *, quiet: bool = False, **run):
     """Run (or resume) a training run (:func:`neuspike.train.loop.train`)."""
     from neuspike.train.loop import train as _train
 
-    return _train(spec, quiet=quiet)
+    return _train(spec, quiet=quiet, **run)

@@ -1,8 +1,10 @@
 """``python -m neuspike.train NAME``: train a registered learned method on simulated data.
 
-A few flags are parsed into a frozen :class:`~neuspike.train.spec.TrainSpec` (saved as
-``spec.json`` in the run folder) and :func:`~neuspike.train.loop.train` runs it. Running the same
-command again resumes from the run folder's last checkpoint.
+The method says what it trains on: a recurrent method (``e2vid``, ``firenet-sim``) on sequences of
+event windows, a feed-forward one (``neuspike-net``) on single windows. A few flags are parsed into
+one frozen :class:`~neuspike.train.spec.TrainSpec` (saved as ``spec.json`` in the run folder) and
+:func:`~neuspike.train.loop.train` runs it; the same command again resumes from the run folder's
+checkpoint. Nothing heavy (torch) is imported before the arguments are parsed.
 """
 
 from __future__ import annotations
@@ -10,82 +12,196 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import fields
+from typing import Any, Sequence
 
-from neuspike.errors import NeuSpikeError
-from neuspike.train.spec import TrainSpec, load_spec
+#: Flags that apply to one data kind only (a flag given for the other kind is refused).
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers")
+SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
-_DEFAULTS = TrainSpec()
+#: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
+KIND_DEFAULTS: dict[str, dict[str, Any]] = {
+    "windows": {},
+    "sequences": {"optimizer": "adam", "weight_decay": 0.0, "lr": 2e-4, "lr_min": None, "warmup": 50, "steps": 2000,
+                  "batch": 4, "crop": 96, "val_every": 100, "checkpoint_every": 25, "threads": None, "export": True},
+}
+PRESETS: dict[str, dict[str, Any]] = {
+    # lr per network size: FireNet's 38k parameters take a larger step than E2VID's 10.7M
+    "firenet-sim": {"lr": 1e-3, "crop": 64, "batch": 4, "length": 8, "steps": 3000, "val_every": 50,
+                    "checkpoint_every": 25, "precision": "float32", "val_items": 8},
+    "e2vid": {"lr": 5e-4, "crop": 48, "batch": 4, "length": 6, "steps": 4000, "val_every": 50,
+              "checkpoint_every": 10, "val_items": 8},
+}
+QUICK = {"steps": 20, "val_every": 10, "checkpoint_every": 10, "batch": 2, "train_items": 8, "val_items": 2}
+QUICK_KIND = {"windows": {"crop": 32, "view": 32}, "sequences": {"crop": 32, "size": 48, "windows": 4, "length": 4}}
+
+DESCRIPTION = """\
+Train a registered learned method on data simulated from the training photographs (the test
+photographs are refused) and procedural scenes. What a training item is follows from the method:
+a recurrent method (e2vid, firenet-sim) trains on sequences of event windows of one moving scene,
+with exact-flow temporal loss; a feed-forward one (neuspike-net) on single windows of spikes and
+events. The data are simulated once into a shard and reused; the run folder (--out) holds
+spec.json, checkpoint.pt, train_log.csv and the best-by-validation weights with their JSON card.
+Running the same command again resumes from the checkpoint (a different spec is refused)."""
+
+EPILOG = """\
+examples (the commands behind the shipped weights are in reports/<network>/README.md):
+  python -m neuspike.train neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 \\
+      --val-windows 32 --val-every 200 --lr 1e-3 --warmup 100 --threads 1 --export
+  python -m neuspike.train neuspike-net --spec reports/neuspike-net/spec_stage2.json --export
+  python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
+  python -m neuspike.train e2vid --quick --no-export      # a one-minute smoke run"""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m neuspike.train",
-        description="Train a registered learned method (e.g. neuspike-net) on windows simulated from the "
-                    "training photographs and dead-leaves scenes. Resumes from OUT/checkpoint.pt when it exists.",
-        epilog="The shipped NeuSpike-Net weights: python -m neuspike.train neuspike-net --export "
-               "(about 75-90 minutes on two CPU cores).")
-    p.add_argument("method", help="registered method name (e.g. neuspike-net)")
-    p.add_argument("--spec", help="a spec.json to run (other flags then ignored, except --out)")
-    p.add_argument("--out", help=f"run folder (default runs/METHOD)")
-    p.add_argument("--shard", default=_DEFAULTS.shard_dir, help="folder of the simulated windows (default %(default)s)")
-    p.add_argument("--steps", type=int, default=_DEFAULTS.steps, help="optimiser steps (default %(default)s)")
-    p.add_argument("--batch", type=int, default=_DEFAULTS.batch, help="samples per step (default %(default)s)")
-    p.add_argument("--crop", type=int, default=_DEFAULTS.crop, help="training crop side (default %(default)s)")
-    p.add_argument("--windows", type=int, default=_DEFAULTS.shard_size,
-                   help="training windows simulated once and reused (default %(default)s)")
-    p.add_argument("--val-windows", type=int, default=_DEFAULTS.val_size, help="validation windows (default %(default)s)")
-    p.add_argument("--val-every", type=int, default=_DEFAULTS.val_every, help="steps between validations (default %(default)s)")
-    p.add_argument("--lr", type=float, default=_DEFAULTS.lr, help="peak learning rate (default %(default)s)")
-    p.add_argument("--warmup", type=int, default=_DEFAULTS.warmup, help="warm-up steps (default %(default)s)")
-    p.add_argument("--spike-only-fraction", type=float, default=_DEFAULTS.spike_only_fraction,
-                   help="fraction of steps training the spike-only variant inside a fusion network (default %(default)s)")
-    p.add_argument("--seed", type=int, default=_DEFAULTS.seed, help="seed of data, order and weights (default %(default)s)")
-    p.add_argument("--threads", type=int, default=_DEFAULTS.threads, help="torch threads (default %(default)s)")
-    p.add_argument("--workers", type=int, default=_DEFAULTS.workers, help="processes simulating windows (default %(default)s)")
-    p.add_argument("--precision", choices=("auto", "float32", "bfloat16"), default="auto",
-                   help="autocast precision (default: bfloat16 where the CPU has it natively)")
-    p.add_argument("--param", action="append", default=[], metavar="KEY=JSON",
+    p = argparse.ArgumentParser(prog="python -m neuspike.train", description=DESCRIPTION, epilog=EPILOG,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("method", help="registered learned method (neuspike-net, e2vid, firenet-sim, ...)")
+    p.add_argument("--spec", help="run this spec.json (of this trainer or an earlier one); other flags are then "
+                                  "ignored except --out")
+    p.add_argument("--out", "--run-dir", dest="out", help="run folder (default runs/METHOD)")
+    p.add_argument("--shard", "--shards", dest="shard",
+                   help="folder of the simulated data (default runs/shard for windows, runs/shards for sequences)")
+    g = p.add_argument_group("optimisation")
+    g.add_argument("--steps", type=int, help="optimiser steps")
+    g.add_argument("--batch", type=int, help="items per step")
+    g.add_argument("--crop", type=int, help="side of the square training crops (pixels)")
+    g.add_argument("--lr", type=float, help="peak learning rate")
+    g.add_argument("--lr-min", type=float,
+                   help="decay the rate along a cosine to this value at --steps (windows default 1e-5; sequences "
+                        "default: constant rate)")
+    g.add_argument("--warmup", type=int, help="learning-rate warm-up steps (windows 200, sequences 50)")
+    g.add_argument("--val-every", type=int, help="validate (and export a new best) every N steps")
+    g.add_argument("--seed", type=int, default=0, help="seed of data, order and initial weights (default 0)")
+    g.add_argument("--threads", type=int, help="torch threads (windows default 1; 1 when another job shares the CPU)")
+    g.add_argument("--precision", choices=("auto", "float32", "bfloat16"),
+                   help="autocast precision (default auto: bfloat16 where the CPU computes it natively; "
+                        "firenet-sim float32)")
+    g.add_argument("--param", action="append", default=[], metavar="KEY=JSON",
                    help="override a parameter of the method's registry entry (e.g. fusion='\"attention\"')")
-    p.add_argument("--export", action="store_true", help="also write the best weights into neuspike/trained/")
-    p.add_argument("--init-from", metavar="FILE.safetensors",
-                   help="start from these weights (the full module, e.g. an earlier run's export) instead of fresh ones")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    g.add_argument("--init-from", metavar="FILE.safetensors",
+                   help="start from these weights instead of fresh ones (copy shipped weights elsewhere first: "
+                        "an export overwrites them); a checkpoint in the run folder still wins")
+    d = p.add_argument_group("data")
+    d.add_argument("--windows", type=int,
+                   help="single windows: training windows simulated (default 4000); sequences: event windows per "
+                        "sequence (default 8)")
+    d.add_argument("--train-items", type=int, help="training windows or sequences simulated")
+    d.add_argument("--val-items", type=int, help="validation windows or sequences simulated")
+    d.add_argument("--val-windows", type=int, help="single windows: validation windows (= --val-items)")
+    d.add_argument("--noise-levels", metavar="N1,N2,...",
+                   help="noise levels drawn (default none,small,medium,high); a level listed twice is drawn twice "
+                        "as often (sequences)")
+    d.add_argument("--spike-only-fraction", type=float,
+                   help="single windows: fraction of steps training the spike-only variant of a fusion network "
+                        "(default 0.3)")
+    d.add_argument("--workers", type=int, help="single windows: processes simulating windows (default 2)")
+    d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
+    d.add_argument("--view", metavar="WxH",
+                   help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
+                        "the sweeps' scale); default: the photograph fitted to the item itself")
+    d.add_argument("--length", type=int, help="sequences: windows per training sequence (<= --windows)")
+    d.add_argument("--kinds", metavar="K1,K2,...",
+                   help="sequences: scene kinds drawn, from pan,zoom,fan,dead_leaves (default pan,zoom,fan)")
+    d.add_argument("--hdr-fraction", type=float, metavar="F",
+                   help="sequences: share of items with high-dynamic-range radiance (default 0.5)")
+    o = p.add_argument_group("output and run")
+    o.add_argument("--export", action="store_true",
+                   help="also write the best weights into neuspike/trained/ (the default for sequences)")
+    o.add_argument("--no-export", action="store_true", help="write the best weights into the run folder only")
+    o.add_argument("--export-dir", help="also write the best weights into this folder (not into neuspike/trained/)")
+    o.add_argument("--snapshot-every", type=int, metavar="N",
+                   help="also keep every N-th step's weights under RUN/snapshots/")
+    o.add_argument("--max-minutes", type=float, help="stop after this many minutes, checkpointed (resume later)")
+    o.add_argument("--simulate-only", action="store_true", help="build the simulated data and stop")
+    o.add_argument("--quick", action="store_true", help="a tiny run that finishes in a minute (smoke test)")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
-def spec_from_args(args: argparse.Namespace) -> TrainSpec:
+def _list(text: str) -> tuple[str, ...]:
+    return tuple(v.strip() for v in text.split(",") if v.strip())
+
+
+def spec_from_args(args: argparse.Namespace):
+    """The :class:`~neuspike.train.spec.TrainSpec` of parsed arguments (imports the registry)."""
+    from neuspike.errors import InputError
+    from neuspike.methods import entry
+    from neuspike.train.spec import SequenceData, TrainSpec, WindowData, load_spec, with_out_dir
+
     if args.spec:
-        spec = load_spec(args.spec)
-        if args.out:
-            spec = TrainSpec(**{**spec.as_dict(), "out_dir": args.out})
-        return spec
+        spec = load_spec(args.spec, out_dir=args.out or f"runs/{args.method}")
+        if spec.method != args.method:
+            raise InputError(f"--spec {args.spec} trains {spec.method!r}, not {args.method!r}")
+        return with_out_dir(spec, args.out) if args.out else spec
+    e = entry(args.method)
+    kind = "sequences" if getattr(e.factory, "recurrent", False) else "windows"
+    wrong = SEQUENCE_ONLY if kind == "windows" else WINDOW_ONLY
+    given = [n for n in wrong if getattr(args, n) is not None]
+    if given:
+        raise InputError(f"{', '.join('--' + n.replace('_', '-') for n in given)}: not for {args.method!r}, "
+                         f"which trains on {kind}")
+    if args.export and args.no_export:
+        raise InputError("--export and --no-export: choose one")
+    kw: dict[str, Any] = {**KIND_DEFAULTS[kind], **PRESETS.get(args.method, {})}
+    if args.quick:
+        kw.update(QUICK, **QUICK_KIND[kind])
+    data_fields = WindowData.__dataclass_fields__ if kind == "windows" else SequenceData.__dataclass_fields__
+    top = {"steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "threads", "precision", "init_from"}
+    for name in top:
+        if getattr(args, name) is not None:
+            kw[name] = getattr(args, name)
+    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction"):
+        if getattr(args, name) is not None:
+            kw[name] = getattr(args, name)
+    if args.val_windows is not None:
+        kw["val_items"] = args.val_windows
+    if args.windows is not None:
+        kw["train_items" if kind == "windows" else "windows"] = args.windows
+    if args.view is not None:
+        from neuspike.checks import parse_size
+
+        kw["view"] = parse_size(args.view)
+    for name in ("kinds", "noise_levels"):
+        if getattr(args, name) is not None:
+            kw[name] = _list(getattr(args, name))
+    if args.shard is not None:
+        kw["shard_dir" if kind == "windows" else "shard_root"] = args.shard
     params = {}
     for item in args.param:
         key, sep, value = item.partition("=")
         if not sep:
-            raise NeuSpikeError(f"--param: expected KEY=JSON, got {item!r}")
+            raise InputError(f"--param: expected KEY=JSON, got {item!r}")
         try:
             params[key] = json.loads(value)
         except ValueError:
             params[key] = value
-    return TrainSpec(method=args.method, out_dir=args.out or f"runs/{args.method}", shard_dir=args.shard,
-                     steps=args.steps, batch=args.batch, crop=args.crop, shard_size=args.windows,
-                     val_size=args.val_windows, val_every=args.val_every, lr=args.lr, warmup=args.warmup,
-                     spike_only_fraction=args.spike_only_fraction, seed=args.seed,
-                     threads=args.threads, workers=args.workers, precision=args.precision, params=params,
-                     export=args.export, init_from=args.init_from)
+    if args.export:
+        kw["export"] = True
+    if args.no_export or args.export_dir is not None:
+        kw["export"] = False
+    data = (WindowData if kind == "windows" else SequenceData)(**{k: kw.pop(k) for k in list(kw) if k in data_fields})
+    out = args.out or f"runs/{args.method}" + ("-quick" if args.quick and kind == "sequences" else "")
+    return TrainSpec(method=args.method, data=data, out_dir=out, seed=args.seed, params=params,
+                     export_dir=args.export_dir, **kw)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from neuspike.errors import NeuSpikeError
+
     try:
         spec = spec_from_args(args)
         from neuspike.train.loop import train
 
-        result = train(spec, quiet=args.quiet)
+        result = train(spec, quiet=args.quiet, max_minutes=args.max_minutes, snapshot_every=args.snapshot_every,
+                       simulate_only=args.simulate_only)
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a full disk, a file size limit, a folder that cannot be written
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     print(json.dumps(result))
     return 0

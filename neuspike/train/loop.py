@@ -1,341 +1,223 @@
-"""The training loop: data order, loss, schedule, validation, atomic checkpoints, resume, export.
+"""The training loop, one for every learned method and data kind.
 
-Training protocol: the method named by ``spec.method`` must be a registered learned method whose
-class offers ``module_for(params) -> nn.Module`` (an untrained module) and
-``encode_sample(sample, params) -> tuple of (1, C, H, W) tensors`` (the module's inputs); the
-target is the sample's ground truth (1, 1, H, W). Feed-forward only; recurrent sequence training
-lives beside this module.
+The method named by ``spec.method`` is a registered :class:`~neuspike.learned.LearnedMethod`; the
+trainer builds it with :meth:`~neuspike.learned.LearnedMethod.for_training` (a fresh module from
+``torch.manual_seed(spec.seed)``, no weights file) and reads samples through the method's own
+:meth:`~neuspike.learned.LearnedMethod.encode`. The data section of the spec picks the task:
+:class:`~neuspike.train.windows.WindowTask` (single windows) or
+:class:`~neuspike.train.sequences.SequenceTask` (sequences, for recurrent methods); the task draws
+each step's batch from the seed and the step alone, so a resumed run computes what a straight one
+does.
 
-* **order**: step ``k`` uses the windows ``perm_e[j]`` of epoch ``e`` (a permutation drawn from
-  ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``: the
-  same seed gives the same batches, also after a resume.
-* **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
-* **optimiser**: AdamW (``lr``, ``weight_decay``), linear warm-up over ``warmup`` steps, cosine decay
-  to ``lr_min`` at ``steps``; gradients clipped to norm 1.
-* **spike-only steps**: for a fusion network (one with ``spike_only=False``), a fraction
-  ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with the
-  motion path silenced, so the same weights also train the spike-only variant.
-* **validation** every ``val_every`` steps on the fixed validation windows (full 128x128, no
-  augmentation): L1, PSNR, SSIM; for a fusion network also with the motion path silenced.
-* **checkpoint** (model, optimiser, step, best scores) written atomically every ``checkpoint_every``
-  steps and at the end; a run resumes from it with the same spec (a different spec is refused).
-* **export**: the best-by-validation weights go to ``out_dir/best.safetensors`` (+ card) and, with
-  ``spec.export``, into the package's ``neuspike/trained/``.
+Each step: the rate of :func:`~neuspike.train.spec.learning_rate`, the task's loss (under bfloat16
+autocast where the precision says so), AdamW or Adam, gradients clipped to norm 1. Every
+``val_every`` steps (and at the last) each variant is validated; a better score than the best so
+far (or than the starting weights' with ``init_from``) exports the weights into the run folder
+(and the package's or another folder with ``export`` / ``export_dir``). The checkpoint is written
+every ``checkpoint_every`` steps, after each validation and when the run stops
+(:mod:`neuspike.train.checkpoint`).
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import json
-import math
-import os
+import contextlib
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator
 
-import numpy as np
 import torch
 
-from neuspike import atomic
 from neuspike.errors import InputError
-from neuspike.learned import native_bfloat16
-from neuspike.methods import entry
-from neuspike.rng import derive_rng
-from neuspike.train.data import augment, build_shard, load_sample
-from neuspike.train.spec import TrainSpec
-from neuspike.weights import PACKAGE_WEIGHTS, load_safetensors, load_state_strict, save_safetensors
+from neuspike.train import checkpoint as ck
+from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 
-__all__ = ["LOG_COLUMNS", "Trainer", "learning_rate", "train"]
-
-LOG_COLUMNS = ("step", "kind", "loss", "l1", "ssim_loss", "lr", "seconds", "samples_per_s",
-               "val_l1", "val_psnr", "val_ssim", "variant")
-#: Module tensors only the fusion network has (left out of the spike-only export).
-MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.")
+__all__ = ["Trainer", "train", "training_method"]
 
 
-def learning_rate(spec: TrainSpec, step: int) -> float:
-    """The schedule: linear warm-up to ``lr``, cosine decay to ``lr_min`` (``step`` counts from 0)."""
-    if step < spec.warmup:
-        return spec.lr * (step + 1) / spec.warmup
-    frac = min(1.0, (step - spec.warmup) / max(1, spec.steps - spec.warmup))
-    return spec.lr_min + 0.5 * (spec.lr - spec.lr_min) * (1.0 + math.cos(math.pi * frac))
+def training_method(spec: TrainSpec):
+    """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights)."""
+    from neuspike.learned import LearnedMethod
+    from neuspike.methods import entry
 
-
-def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    mse = ((pred - target) ** 2).mean(dim=(1, 2, 3)).clamp_min(1e-10)
-    return 10.0 * torch.log10(1.0 / mse)
+    e = entry(spec.method)
+    if not (isinstance(e.factory, type) and issubclass(e.factory, LearnedMethod)):
+        raise InputError(f"method {spec.method!r} is not a learned method; it cannot be trained")
+    want = "sequences" if e.factory.recurrent else "windows"
+    if spec.kind != want:
+        raise InputError(f"method {spec.method!r} trains on {want}, but the spec's data are {spec.kind}")
+    torch.manual_seed(spec.seed)
+    return e.factory.for_training(e.name, **{**dict(e.params), **spec.params})
 
 
 class Trainer:
-    """One training run of ``spec`` (see the module docstring)."""
+    """One training run of ``spec`` (module docstring)."""
 
     def __init__(self, spec: TrainSpec, *, quiet: bool = False) -> None:
         self.spec = spec
         self.quiet = quiet
         self.out = Path(spec.out_dir)
-        self.entry = entry(spec.method)
-        cls = self.entry.factory
-        if not (hasattr(cls, "module_for") and hasattr(cls, "encode_sample")):
-            raise InputError(f"method {spec.method!r} does not offer the training protocol (module_for, encode_sample)")
-        self.cls = cls
-        self.params = {**dict(self.entry.params), **spec.params}
-        self.fusion = self.params.get("spike_only") is False
-        torch.manual_seed(spec.seed)
-        self.module = cls.module_for(self.params)
-        if spec.init_from is not None:  # a second stage: start from earlier weights (a checkpoint still wins)
-            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from)
-        self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
-        import kornia
+        self.method = training_method(spec)
+        self.module = self.method.module.float().train()
+        if isinstance(spec.data, WindowData):
+            from neuspike.train.windows import WindowTask
 
-        self.ssim_loss = kornia.losses.SSIMLoss(window_size=spec.ssim_window, max_val=1.0)
-        bf16 = spec.precision == "bfloat16" or (spec.precision == "auto" and native_bfloat16())
-        self.precision = "bfloat16" if bf16 else "float32"
-        self.step = 0
-        self.best: dict[str, float] = {}
-        self.history: list[dict[str, Any]] = []
-
-    # -- data ------------------------------------------------------------------------------------
-
-    def prepare_data(self) -> None:
-        spec = self.spec
-        shard = Path(spec.shard_dir)
-        shard.mkdir(parents=True, exist_ok=True)
-        key_path = shard / "data_key.json"
-        key = spec.data_key()
-        if key_path.exists():
-            have = json.loads(key_path.read_text())
-            if have != key:
-                raise InputError(f"{shard}: holds windows of another data spec {have}; use another shard_dir")
+            self.task = WindowTask(spec, self.method)
         else:
-            atomic.write_json(key_path, key)
-        bar = self._bar(total=spec.val_size + spec.shard_size, desc="simulating windows", unit="win")
-        self.val_paths = build_shard(spec, shard, "val", spec.val_size, progress=bar.update)
-        self.train_paths = build_shard(spec, shard, "train", spec.shard_size, progress=bar.update)
-        bar.close()
-        self.val_batch = self._encode([load_sample(p) for p in self.val_paths])
+            from neuspike.train.sequences import SequenceTask
 
-    def _encode(self, samples: list) -> tuple[list[torch.Tensor], torch.Tensor]:
-        inputs = [self.cls.encode_sample(s, self.params) for s in samples]
-        stacked = [torch.cat([x[k] for x in inputs]) for k in range(len(inputs[0]))]
-        target = torch.stack([torch.from_numpy(s.ground_truth)[None] for s in samples])
-        return stacked, target
+            self.task = SequenceTask(spec, self.method)
+        if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
+            from neuspike.weights import load_safetensors, load_state_strict
 
-    def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The inputs and targets of ``step`` (deterministic from the seed and the step)."""
-        spec = self.spec
-        n = len(self.train_paths)
-        first = step * spec.batch
-        idx = []
-        for j in range(first, first + spec.batch):
-            epoch, pos = divmod(j, n)
-            perm = derive_rng(spec.seed, "order", epoch).permutation(n)
-            idx.append(int(perm[pos]))
-        rng = derive_rng(spec.seed, "augment", step)
-        inputs, targets = [], []
-        for i in idx:
-            sample = load_sample(self.train_paths[i])
-            x = [t[0] for t in self.cls.encode_sample(sample, self.params)]
-            y = torch.from_numpy(sample.ground_truth)[None]
-            *x, y = augment([*x, y], rng, spec.crop)
-            inputs.append(x)
-            targets.append(y)
-        return [torch.stack([x[k] for x in inputs]) for k in range(len(inputs[0]))], torch.stack(targets)
+            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from)
+        if spec.optimizer == "adamw":
+            self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
+        else:
+            self.optim = torch.optim.Adam(self.module.parameters(), lr=spec.lr)
+        from neuspike.learned import resolve_precision
 
-    def spike_only_step(self, step: int) -> bool:
-        return self.fusion and derive_rng(self.spec.seed, "modality", step).random() < self.spec.spike_only_fraction
+        self.precision = resolve_precision(spec.precision, torch.device("cpu"))
+        self.task.precision = self.precision
+        self.step = 0
+        self.wall_s = 0.0
+        self.best: dict[str, dict[str, float]] = {}
+        self.last_scores: dict[str, dict[str, float]] = {}
 
-    # -- model -----------------------------------------------------------------------------------
+    # -- pieces ------------------------------------------------------------------------------------
 
-    def forward(self, inputs: list[torch.Tensor], *, spike_only: bool) -> torch.Tensor:
-        if spike_only:
-            return self.module.forward_texture_only(inputs[0])
-        return self.module(*inputs)
-
-    def _autocast(self):
-        import contextlib
-
+    @contextlib.contextmanager
+    def autocast(self) -> Iterator[None]:
         if self.precision == "bfloat16":
-            return torch.autocast("cpu", dtype=torch.bfloat16)
-        return contextlib.nullcontext()
-
-    def loss(self, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        pred = pred.float()
-        l1 = (pred - target).abs().mean()
-        ssim = self.ssim_loss(pred, target)
-        return l1 + self.spec.ssim_weight * ssim, l1, ssim
-
-    def train_step(self, inputs: list[torch.Tensor], target: torch.Tensor, *, spike_only: bool) -> dict[str, float]:
-        self.module.train()
-        for group in self.optim.param_groups:
-            group["lr"] = learning_rate(self.spec, self.step)
-        with self._autocast():
-            pred = self.forward(inputs, spike_only=spike_only)
-        loss, l1, ssim = self.loss(pred, target)
-        self.optim.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(self.module.parameters(), 1.0)
-        self.optim.step()
-        return {"loss": loss.item(), "l1": l1.item(), "ssim_loss": ssim.item()}
-
-    @torch.no_grad()
-    def validate(self, *, spike_only: bool) -> dict[str, float]:
-        self.module.eval()
-        inputs, target = self.val_batch
-        preds = []
-        for i in range(0, target.shape[0], 8):
-            with self._autocast():
-                preds.append(self.forward([x[i:i + 8] for x in inputs], spike_only=spike_only).float())
-        pred = torch.cat(preds).clamp(0, 1)
-        import kornia
-
-        ssim = kornia.metrics.ssim(pred, target, window_size=11, max_val=1.0).mean(dim=(1, 2, 3))
-        return {"val_l1": float((pred - target).abs().mean()), "val_psnr": float(_psnr(pred, target).mean()),
-                "val_ssim": float(ssim.mean())}
-
-    # -- files -----------------------------------------------------------------------------------
+            with torch.autocast("cpu", dtype=torch.bfloat16):
+                yield
+        else:
+            yield
 
     def _bar(self, **kw):
         from tqdm import tqdm
 
         return tqdm(disable=self.quiet, dynamic_ncols=True, **kw)
 
-    def write_spec(self) -> None:
-        self.out.mkdir(parents=True, exist_ok=True)
-        path = self.out / "spec.json"
-        mine = self.spec.as_dict()
-        if path.exists():
-            have = json.loads(path.read_text())
-            if have != mine:
-                raise InputError(f"{path}: this folder holds a run of another spec; resume with the same spec "
-                                 f"or use another --out")
-        else:
-            atomic.write_json(path, mine)
+    def train_step(self) -> dict[str, Any]:
+        """One optimiser step (``self.step`` -> ``self.step + 1``); returns the log row."""
+        t0 = time.perf_counter()
+        lr = learning_rate(self.spec, self.step)
+        for group in self.optim.param_groups:
+            group["lr"] = lr
+        self.module.train()
+        loss, info = self.task.step_loss(self.step, self.autocast)
+        self.optim.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.module.parameters(), 1.0)
+        self.optim.step()
+        self.step += 1
+        return {"step": self.step, "kind": "train", "loss": float(loss.detach()), "lr": lr,
+                "seconds": round(time.perf_counter() - t0, 4), **info}
 
-    def save_checkpoint(self) -> None:
-        buf = io.BytesIO()
-        torch.save({"step": self.step, "model": self.module.state_dict(), "optim": self.optim.state_dict(),
-                    "best": self.best, "torch_rng": torch.get_rng_state()}, buf)
-        atomic.write_bytes(self.out / "checkpoint.pt", buf.getvalue())
-
-    def load_checkpoint(self) -> bool:
-        path = self.out / "checkpoint.pt"
-        if not path.exists():
-            return False
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        self.module.load_state_dict(state["model"])
-        self.optim.load_state_dict(state["optim"])
-        self.step = int(state["step"])
-        self.best = dict(state["best"])
-        torch.set_rng_state(state["torch_rng"])
-        return True
-
-    def log(self, row: Mapping[str, Any]) -> None:
-        path = self.out / "train_log.csv"
-        new = not path.exists()
-        with open(path, "a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=LOG_COLUMNS)
-            if new:
-                w.writeheader()
-            w.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
-
-    def _truncate_log(self) -> None:
-        """After a resume: drop log rows past the checkpoint's step (they will be redone)."""
-        path = self.out / "train_log.csv"
-        if not path.exists():
-            return
-        with open(path, newline="") as f:
-            rows = [r for r in csv.DictReader(f) if int(r["step"]) <= self.step]
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=LOG_COLUMNS)
-        w.writeheader()
-        w.writerows(rows)
-        atomic.write_text(path, buf.getvalue())
-
-    def card(self, variant: str, scores: Mapping[str, float], params: Mapping[str, Any]) -> dict[str, Any]:
-        return {"method": variant, "model": {"class": self.cls.__name__, "params": dict(params)},
-                "training": {"spec": self.spec.as_dict(), "step": self.step, "precision": self.precision,
-                             "command": f"python -m neuspike.train {self.spec.method} (spec.json beside the checkpoint)"},
-                "data": {"simulator": "neuspike.simulate.simulate_sample", "train_windows": self.spec.shard_size,
-                         "val_windows": self.spec.val_size, "photos": list(self.spec.photos),
-                         "procedural": "dead_leaves"},
-                "validation": dict(scores), "torch": torch.__version__}
-
-    def export(self, variant: str, scores: Mapping[str, float]) -> None:
-        params = dict(self.params)
-        state = self.module.state_dict()
-        name = self.entry.name
-        if variant == "spike":
-            state = {k: v for k, v in state.items() if not k.startswith(MOTION_PREFIXES)}
-            params["spike_only"] = True
-            name = f"{self.entry.name}-spike"
-        file_name = f"{name}.safetensors"
-        card = self.card(name, scores, params)
-        save_safetensors(state, self.out / file_name, card=card)
-        if self.spec.export:
-            save_safetensors(state, Path(PACKAGE_WEIGHTS) / file_name, card=card)
-
-    # -- the run ---------------------------------------------------------------------------------
-
-    def run(self, *, until: int | None = None) -> dict[str, Any]:
-        """Train up to ``spec.steps`` (or stop early after step ``until``, checkpointed, as a kill would)."""
-        spec = self.spec
-        last = spec.steps if until is None else min(int(until), spec.steps)
-        torch.set_num_threads(spec.threads)
-        self.write_spec()
-        resumed = self.load_checkpoint()
-        if resumed:
-            self._truncate_log()
-        self.prepare_data()
-        if not resumed and spec.init_from is not None:
-            # the starting weights set the bar: a second stage exports only what improves on them
-            for variant, spike_only in self._variants():
-                scores = self.validate(spike_only=spike_only)
-                self.log({"step": 0, "kind": "val", "variant": variant, **scores})
-                self.best[variant] = scores["val_psnr"]
-        bar = self._bar(total=spec.steps, initial=self.step, desc=f"training {spec.method}", unit="step")
-        t_last = time.perf_counter()
-        while self.step < last:
-            spike_only = self.spike_only_step(self.step)
-            t0 = time.perf_counter()
-            inputs, target = self.batch(self.step)
-            t_data = time.perf_counter() - t0
-            stats = self.train_step(inputs, target, spike_only=spike_only)
-            self.step += 1
-            now = time.perf_counter()
-            row = {"step": self.step, "kind": "train", "lr": learning_rate(spec, self.step - 1),
-                   "seconds": round(now - t_last, 4), "samples_per_s": round(spec.batch / max(t_data, 1e-9), 1),
-                   "variant": "spike" if spike_only else ("fusion" if self.fusion else "single"), **stats}
-            t_last = now
-            self.log(row)
-            bar.set_postfix(loss=f"{stats['loss']:.4f}", lr=f"{row['lr']:.1e}")
-            bar.update(1)
-            if self.step % spec.val_every == 0 or self.step == spec.steps:
-                self._validate_and_export()
-            if self.step % spec.checkpoint_every == 0 or self.step in (spec.steps, last):
-                self.save_checkpoint()
-        bar.close()
-        return {"step": self.step, "best": dict(self.best), "resumed": resumed}
-
-    def _variants(self) -> list[tuple[str, bool]]:
-        """(variant name, spike_only) of every variant this run validates and exports."""
-        return [("fusion", False), ("spike", True)] if self.fusion else [("single", False)]
-
-    def _validate_and_export(self) -> None:
-        for variant, spike_only in self._variants():
-            scores = self.validate(spike_only=spike_only)
-            self.log({"step": self.step, "kind": "val", "variant": variant, **scores})
-            self.history.append({"step": self.step, "variant": variant, **scores})
-            if scores["val_psnr"] > self.best.get(variant, -math.inf):
-                self.best[variant] = scores["val_psnr"]
-                self.export("spike" if variant == "spike" else "main", scores)
+    def validate_and_export(self, *, force_bar: bool = False) -> None:
+        """Validate every variant; log the scores; export the variants that beat their best."""
+        for variant in self.task.variants():
+            scores = self.task.validate(variant, self.autocast)
+            self.last_scores[variant] = scores
+            ck.append_log(self.out, {"step": self.step, "kind": "val", "variant": variant, **scores})
+            if scores[self.task.score_key] > ck.best_score(self.best, variant, self.task.score_key):
+                self.best[variant] = {"step": self.step, **scores}
+                if not force_bar:
+                    self.export(variant, scores, self._targets())
             if not self.quiet:
                 from tqdm import tqdm
 
-                tqdm.write(f"step {self.step} {variant}: val PSNR {scores['val_psnr']:.2f} dB, "
-                           f"SSIM {scores['val_ssim']:.4f}, L1 {scores['val_l1']:.4f}")
+                tqdm.write(f"step {self.step} {variant}: " + ", ".join(f"{k} {v:.4f}" for k, v in scores.items()))
+
+    def _targets(self) -> list[Path]:
+        from neuspike.weights import PACKAGE_WEIGHTS
+
+        targets = [self.out]
+        if self.spec.export:
+            targets.append(Path(PACKAGE_WEIGHTS))
+        if self.spec.export_dir is not None:
+            targets.append(Path(self.spec.export_dir))
+        return targets
+
+    def export(self, variant: str, scores: dict[str, float], folders: list[Path]) -> None:
+        name, state, params = self.task.exported(variant, self.spec.method)
+        card = ck.make_card(self.spec, name=name, model_class=type(self.method).__name__, params=params,
+                            step=self.step, precision=self.precision, wall_s=self.wall_s, scores=scores,
+                            data=self.task.describe_data())
+        ck.export_weights(state, folders, name, card)
+
+    def save(self) -> None:
+        ck.save_checkpoint(self.out, step=self.step, module=self.module, optimizer=self.optim, best=self.best,
+                           wall_s=self.wall_s)
+
+    def resume(self) -> bool:
+        state = ck.load_checkpoint(self.out, score_key=self.task.score_key, variants=self.task.variants())
+        if state is None:
+            return False
+        self.module.load_state_dict(state["module"])
+        self.optim.load_state_dict(state["optimizer"])
+        self.step = int(state["step"])
+        self.best = {k: dict(v) for k, v in state["best"].items()}
+        self.wall_s = float(state["wall_s"])
+        if state.get("torch_rng") is not None:
+            torch.set_rng_state(state["torch_rng"])
+        return True
+
+    # -- the run -----------------------------------------------------------------------------------
+
+    def run(self, *, until: int | None = None, max_minutes: float | None = None,
+            snapshot_every: int | None = None, simulate_only: bool = False) -> dict[str, Any]:
+        """Train up to ``spec.steps``, or stop (checkpointed, as a kill would) after step ``until`` or
+        after ``max_minutes``; ``snapshot_every`` also keeps every N-th step's weights under
+        ``out_dir/snapshots/step-NNNNN/``; ``simulate_only`` builds the data and stops."""
+        spec = self.spec
+        if snapshot_every is not None and (isinstance(snapshot_every, bool) or snapshot_every < 1):
+            raise InputError(f"snapshot_every: expected a positive step count, got {snapshot_every}")
+        if max_minutes is not None and not max_minutes > 0:
+            raise InputError(f"max_minutes: expected a positive number, got {max_minutes}")
+        last = spec.steps if until is None else min(int(until), spec.steps)
+        if spec.threads is not None:
+            torch.set_num_threads(spec.threads)
+        ck.remove_temporaries(self.out)
+        ck.check_spec(spec)
+        for folder in self.task.shard_folders():
+            ck.remove_temporaries(folder)
+        self.task.prepare(self._bar)
+        if simulate_only:
+            return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}
+        resumed = self.resume()
+        ck.trim_log(self.out, self.step)
+        self.task.load_validation()
+        if not resumed and spec.init_from is not None:
+            # the starting weights set the bar: a later stage exports only what improves on them
+            self.validate_and_export(force_bar=True)
+        bar = self._bar(total=spec.steps, initial=self.step, desc=f"training {spec.method}", unit="step")
+        started = time.perf_counter()
+        wall0 = self.wall_s
+        while self.step < last:
+            if max_minutes is not None and time.perf_counter() - started > 60 * max_minutes:
+                break
+            row = self.train_step()
+            self.wall_s = wall0 + time.perf_counter() - started
+            row["wall_s"] = round(self.wall_s, 3)
+            ck.append_log(self.out, row)
+            bar.set_postfix(loss=f"{row['loss']:.4f}", lr=f"{row['lr']:.1e}")
+            bar.update(1)
+            validated = self.step % spec.val_every == 0 or self.step == spec.steps
+            if validated:
+                self.validate_and_export()
+            if snapshot_every is not None and self.step % snapshot_every == 0:
+                folder = self.out / "snapshots" / f"step-{self.step:05d}"
+                for variant in self.task.variants():
+                    self.export(variant, self.last_scores.get(variant, {}) if validated else {}, [folder])
+            if validated or self.step % spec.checkpoint_every == 0 or self.step == last:
+                self.save()
+        self.save()
+        bar.close()
+        return {"step": self.step, "best": self.best, "resumed": resumed, "wall_s": round(self.wall_s, 1)}
 
 
-def train(spec: TrainSpec, *, quiet: bool = False) -> dict[str, Any]:
-    """Run (or resume) the training of ``spec``; returns the final step and the best validation PSNRs."""
-    return Trainer(spec, quiet=quiet).run()
+def train(spec: TrainSpec, *, quiet: bool = False, **run: Any) -> dict[str, Any]:
+    """Run (or resume) the training of ``spec`` (:meth:`Trainer.run`'s options); returns the final
+    step, the best validation scores per variant and the wall time."""
+    return Trainer(spec, quiet=quiet).run(**run)

@@ -1,124 +1,129 @@
-"""The frozen training specification: plain data, validated, saved as JSON beside the checkpoint."""
+"""The frozen training specification: one :class:`TrainSpec` with a data section, saved as JSON.
+
+The data section says what a training item is:
+
+* :class:`WindowData` (``kind = "windows"``): single simulated windows (spike planes, events and
+  the ground truth at the key instant) for feed-forward networks (NeuSpike-Net);
+* :class:`SequenceData` (``kind = "sequences"``): sequences of consecutive event windows of one
+  moving scene, with their targets and exact flow, for recurrent networks (E2VID, FireNet).
+
+Everything else (optimiser, schedule, validation and checkpoint cadence, precision, starting
+weights) is shared. Spec files written by the earlier trainers (the flat single-window spec and
+the sequence spec with ``lr_warmup_steps``) read back through :func:`spec_from_dict` as the same
+run. This module imports nothing heavy (the command's ``--help`` stays fast).
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
-from dataclasses import asdict, dataclass, field, fields
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Mapping, Union
 
-from neuspike.conditions import NOISE_LEVELS
 from neuspike.errors import InputError
-from neuspike.scenes.photos import TEST_PHOTOS, TRAIN_PHOTOS
 
-__all__ = ["KIND_WEIGHTS", "TrainSpec", "load_spec"]
+__all__ = [
+    "DATA_KINDS", "KIND_WEIGHTS", "KINDS", "LIGHTS", "MOTIONS", "NOISE_LEVELS", "SEQUENCE_KINDS",
+    "SequenceData", "TrainSpec", "WindowData", "learning_rate", "load_spec", "spec_from_dict", "with_out_dir",
+]
 
-#: Scene kinds drawn for training and their probabilities (``dead_leaves`` is procedural).
+#: Scene kinds drawn for single windows and their probabilities (``dead_leaves`` is procedural).
 KIND_WEIGHTS: dict[str, float] = {"pan": 0.3, "zoom": 0.12, "fan": 0.13, "still": 0.05, "dead_leaves": 0.4}
+#: Scene kinds of sequence items by default, and every kind a sequence item can be drawn from.
+KINDS = ("pan", "zoom", "fan")
+SEQUENCE_KINDS = KINDS + ("dead_leaves",)
+#: Motion scales S and light scales L of sequence items.
+MOTIONS = (16, 32, 64, 128, 256)
+LIGHTS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32)
+#: The noise levels of :mod:`neuspike.conditions` (repeated here so that this module stays light;
+#: a test checks they agree).
+NOISE_LEVELS = ("none", "small", "medium", "high")
+_PHOTO_DEFAULT: tuple[str, ...] = ("astronaut", "brick", "cat", "cell", "coffee", "grass", "hubble_deep_field",
+                                   "immunohistochemistry", "page", "rocket")
+
+
+def _whole(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
+    return value
+
+
+def _check_photos(photos: Any) -> tuple[str, ...]:
+    from neuspike.scenes.photos import TEST_PHOTOS, TRAIN_PHOTOS
+
+    photos = tuple(photos)
+    refused = [p for p in photos if p in TEST_PHOTOS]
+    if refused:
+        raise InputError(f"photos: {refused} are test photographs (evaluation only); training may use only "
+                         f"{', '.join(TRAIN_PHOTOS)}")
+    unknown = [p for p in photos if p not in TRAIN_PHOTOS]
+    if unknown:
+        raise InputError(f"photos: {unknown} are not training photographs ({', '.join(TRAIN_PHOTOS)})")
+    if not photos:
+        raise InputError("photos: at least one training photograph is needed")
+    return photos
+
+
+def _check_levels(levels: Any) -> tuple[str, ...]:
+    levels = tuple(levels)
+    bad = sorted(set(levels) - set(NOISE_LEVELS))
+    if bad:
+        raise InputError(f"noise_levels: unknown {bad}; choose from {', '.join(NOISE_LEVELS)}")
+    if not levels:
+        raise InputError("noise_levels: expected at least one level")
+    return levels
 
 
 @dataclass(frozen=True)
-class TrainSpec:
-    """Everything a training run depends on (the JSON beside the checkpoint).
+class WindowData:
+    """Single simulated windows (feed-forward networks), and how they are scored.
 
     Parameters
     ----------
-    method : str
-        A registered learned method offering the training protocol (:mod:`neuspike.train`).
-    out_dir : str
-        Folder of the run: spec.json, checkpoint.pt, train_log.csv.
     shard_dir : str
-        Folder of the simulated windows (shared by runs with the same :meth:`data_key`).
-    seed : int
-        Seeds the data (cells, order, crops) and the initial weights.
-    steps : int
-        Optimiser steps.
-    batch : int
-        Samples per step.
-    crop : int
-        Side of the square training crops (pixels).
+        Folder of the simulated windows (shared by runs with the same :meth:`key`). The photograph
+        crops are named by path in the scene specs, so the bytes depend on this folder too.
     view : int
         Side of the simulated square views the crops come from.
-    shard_size, val_size : int
+    train_items, val_items : int
         Training windows simulated once and reused (with random crops, flips and quarter turns);
         validation windows (never augmented).
-    lr, lr_min : float
-        AdamW learning rate: linear warm-up over ``warmup`` steps to ``lr``, cosine decay to ``lr_min``.
-    weight_decay : float
-    ssim_weight : float
-        Loss = L1 + ssim_weight * kornia SSIM loss (window ``ssim_window``).
-    spike_only_fraction : float
-        Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
-        spike-only variant inside the same weights.
-    val_every, checkpoint_every : int
-        Steps between validations / checkpoints.
-    threads : int
-        torch threads.
-    precision : str
-        ``"auto"`` (bfloat16 autocast where the CPU has it natively), ``"float32"`` or ``"bfloat16"``.
     light_range : (float, float)
         L drawn log-uniformly in this range.
     motions : tuple of int
         S drawn uniformly from these.
-    noise_levels : tuple of str
-        Noise levels drawn uniformly.
-    photos : tuple of str
-        Training photographs (test photographs are refused).
-    params : dict
-        Overrides of the method's registered parameters (the ablation's candidates).
-    export : bool
-        Write the best-by-validation weights into the package (``neuspike/trained/``).
+    noise_levels, photos : tuple of str
+        Noise levels drawn uniformly; training photographs (the test photographs are refused).
     workers : int
-        Processes that simulate the shard.
+        Processes that simulate the shard (not part of the run's identity).
+    ssim_weight, ssim_window : float, int
+        Loss = L1 + ssim_weight * kornia SSIM loss (window ``ssim_window``).
+    spike_only_fraction : float
+        Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
+        spike-only variant inside the same weights.
     """
 
-    method: str = "neuspike-net"
-    out_dir: str = "runs/neuspike-net"
+    kind: ClassVar[str] = "windows"
+
     shard_dir: str = "runs/shard"
-    seed: int = 0
-    steps: int = 9000
-    batch: int = 8
-    crop: int = 128
     view: int = 128
-    shard_size: int = 4000
-    val_size: int = 48
-    lr: float = 5e-4
-    lr_min: float = 1e-5
-    warmup: int = 200
-    weight_decay: float = 1e-4
+    train_items: int = 4000
+    val_items: int = 48
+    light_range: tuple[float, float] = (1 / 40, 0.6)
+    motions: tuple[int, ...] = MOTIONS
+    noise_levels: tuple[str, ...] = NOISE_LEVELS
+    photos: tuple[str, ...] = _PHOTO_DEFAULT
+    workers: int = 2
     ssim_weight: float = 1.0
     ssim_window: int = 11
     spike_only_fraction: float = 0.3
-    val_every: int = 250
-    checkpoint_every: int = 100
-    threads: int = 1
-    precision: str = "auto"
-    light_range: tuple[float, float] = (1 / 40, 0.6)
-    motions: tuple[int, ...] = (16, 32, 64, 128, 256)
-    noise_levels: tuple[str, ...] = ("none", "small", "medium", "high")
-    photos: tuple[str, ...] = TRAIN_PHOTOS
-    params: dict[str, Any] = field(default_factory=dict)
-    export: bool = False
-    workers: int = 2
-    #: Weights (a ``.safetensors`` of the full module) the run starts from instead of a fresh
-    #: initialisation: a second stage of an earlier run. ``None``: fresh weights from ``seed``.
-    init_from: str | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
-        for name in ("steps", "batch", "crop", "view", "shard_size", "val_size", "val_every",
-                     "checkpoint_every", "threads", "workers", "ssim_window"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise InputError(f"{name}: expected a whole number >= 1, got {v!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise InputError(f"seed: expected a whole number >= 0, got {self.seed!r}")
-        if self.crop > self.view:
-            raise InputError(f"crop: {self.crop} is larger than the simulated view {self.view}")
-        if self.crop % 8:
-            raise InputError(f"crop: expected a multiple of 8, got {self.crop}")
-        if not 0 < self.lr_min <= self.lr:
-            raise InputError(f"lr, lr_min: expected 0 < lr_min <= lr, got {self.lr_min}, {self.lr}")
+        for name in ("view", "train_items", "val_items", "workers", "ssim_window"):
+            _whole(name, getattr(self, name), 1)
         if not 0.0 <= self.spike_only_fraction <= 1.0:
             raise InputError(f"spike_only_fraction: expected a fraction in [0, 1], got {self.spike_only_fraction}")
         lo, hi = (float(v) for v in self.light_range)
@@ -129,45 +134,324 @@ class TrainSpec:
         if not motions or any(m < 1 for m in motions):
             raise InputError(f"motions: expected motion scales >= 1, got {self.motions}")
         put(self, "motions", motions)
-        levels = tuple(self.noise_levels)
-        bad = [n for n in levels if n not in NOISE_LEVELS]
-        if not levels or bad:
-            raise InputError(f"noise_levels: unknown {bad}; choose from {', '.join(NOISE_LEVELS)}")
-        put(self, "noise_levels", levels)
-        photos = tuple(self.photos)
-        refused = [p for p in photos if p in TEST_PHOTOS]
-        if refused:
-            raise InputError(f"photos: {refused} are test photographs; training may use only {TRAIN_PHOTOS}")
-        unknown = [p for p in photos if p not in TRAIN_PHOTOS]
-        if unknown:
-            raise InputError(f"photos: {unknown} are not training photographs ({', '.join(TRAIN_PHOTOS)})")
-        if not photos:
-            raise InputError("photos: at least one training photograph is needed")
-        put(self, "photos", photos)
-        put(self, "params", dict(self.params))
-        if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
-            raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
+        put(self, "noise_levels", _check_levels(self.noise_levels))
+        put(self, "photos", _check_photos(self.photos))
+
+    def key(self, seed: int) -> dict[str, Any]:
+        """What the simulated windows depend on (a shard is reused only when this matches).
+
+        (``train_items`` and ``val_items`` only say how many of the same deterministic cells exist.)
+        """
+        return {"seed": seed, "view": self.view, "light_range": list(self.light_range),
+                "motions": list(self.motions), "noise_levels": list(self.noise_levels), "photos": list(self.photos)}
+
+
+@dataclass(frozen=True)
+class SequenceData:
+    """Sequences of event windows of one moving scene (recurrent networks), and how they are scored.
+
+    ``size`` is the simulated item (width = height, pixels); ``windows`` the windows per item;
+    ``events_per_pixel`` the fixed window count per pixel (the methods' 0.35); ``threshold_range``
+    the event contrast thresholds (log units, drawn log-uniformly); ``displacement_px`` the scene
+    displacement aimed at for the history (doubled until the windows fit, at most 4 times).
+    ``kinds`` and ``noise_levels`` are drawn uniformly over the tuple, so a repeated entry is drawn
+    more often.
+
+    ``view`` (width, height) or None: the scene view the photograph is fitted to. With a view, each
+    item is a ``size`` x ``size`` crop of it at a random position, so the photographs are seen at
+    the scale of an evaluation at that view size (the sweeps' 400x250); without one the whole
+    photograph is fitted to ``size`` x ``size``. ``hdr_fraction``: share of items whose photograph
+    is mapped to radiance through a drawn dynamic range of 10 to 1,000; the rest are linear in luma.
+
+    ``shard_root`` holds one folder per :meth:`key`; ``train_items`` / ``val_items`` are the items
+    simulated. Scoring: ``length`` consecutive windows per training sequence, the first
+    ``warmup_windows`` of them only carry the state; loss ``l1 * |o - y| + ssim * (1 - SSIM) +
+    temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``.
+    """
+
+    kind: ClassVar[str] = "sequences"
+    #: Fields that say what an item is (the shard key); the others say how many and how they are scored.
+    KEY_FIELDS: ClassVar[tuple[str, ...]] = ("size", "windows", "events_per_pixel", "threshold_range", "noise_levels",
+                                             "kinds", "photos", "displacement_px", "view", "hdr_fraction")
+
+    size: int = 128
+    windows: int = 8
+    events_per_pixel: float = 0.35
+    threshold_range: tuple[float, float] = (0.1, 0.4)
+    noise_levels: tuple[str, ...] = NOISE_LEVELS
+    kinds: tuple[str, ...] = KINDS
+    photos: tuple[str, ...] = _PHOTO_DEFAULT
+    displacement_px: float = 8.0
+    view: tuple[int, int] | None = None
+    hdr_fraction: float = 0.5
+    shard_root: str = "runs/shards"
+    train_items: int = 300
+    val_items: int = 16
+    length: int = 8
+    warmup_windows: int = 2
+    l1: float = 1.0
+    ssim: float = 1.0
+    temporal: float = 1.0
+    occlusion_alpha: float = 50.0
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        put(self, "photos", _check_photos(self.photos))
+        put(self, "noise_levels", _check_levels(self.noise_levels))
+        kinds = tuple(self.kinds)
+        if not kinds or not set(kinds) <= set(SEQUENCE_KINDS):
+            raise InputError(f"kinds: expected a non-empty subset of {SEQUENCE_KINDS}, got {kinds}")
+        put(self, "kinds", kinds)
+        if self.view is not None and "dead_leaves" in kinds:
+            raise InputError("view: dead_leaves scenes do not render a crop of a larger view; drop one of the two")
+        if self.size < 16 or self.windows < 2:
+            raise InputError(f"size >= 16 and windows >= 2 expected, got {self.size}, {self.windows}")
+        if self.view is not None:
+            try:
+                vw, vh = (int(v) for v in self.view)
+            except (TypeError, ValueError):
+                raise InputError(f"view: expected (width, height), got {self.view!r}") from None
+            if vw < self.size or vh < self.size:
+                raise InputError(f"view: {vw}x{vh} is smaller than the {self.size}x{self.size} items cut from it")
+            put(self, "view", (vw, vh))
+        if not 0.0 <= self.hdr_fraction <= 1.0:
+            raise InputError(f"hdr_fraction: expected a share in [0, 1], got {self.hdr_fraction}")
+        lo, hi = (float(v) for v in self.threshold_range)
+        if not 0 < lo <= hi:
+            raise InputError(f"threshold_range: expected 0 < low <= high, got {self.threshold_range}")
+        put(self, "threshold_range", (lo, hi))
+        _whole("train_items", self.train_items, 1)
+        _whole("val_items", self.val_items, 1)
+        if not 1 <= self.length <= self.windows:
+            raise InputError(f"length: expected 1..{self.windows} windows, got {self.length}")
+        if not 0 <= self.warmup_windows < self.length:
+            raise InputError(f"warmup_windows: expected 0..{self.length - 1}, got {self.warmup_windows}")
+
+    def key(self, seed: int | None = None) -> str:
+        """The shard folder's name: a hash of what an item is (not of the seed, counts or scoring).
+
+        ``view`` and ``hdr_fraction`` are left out at their defaults, so shards made before those
+        fields existed keep their key (the default data: ``f40df6737f28``).
+        """
+        d = {k: v for k, v in asdict(self).items() if k in self.KEY_FIELDS}
+        if d["view"] is None:
+            del d["view"]
+        if d["hdr_fraction"] == 0.5:
+            del d["hdr_fraction"]
+        text = json.dumps(d, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+DataSection = Union[WindowData, SequenceData]
+DATA_KINDS: dict[str, type] = {"windows": WindowData, "sequences": SequenceData}
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """Everything a training run depends on (``spec.json`` beside the checkpoint).
+
+    Parameters
+    ----------
+    method : str
+        A registered learned method (:class:`~neuspike.learned.LearnedMethod`).
+    data : WindowData or SequenceData
+        What is simulated and how it is scored.
+    out_dir : str
+        The run folder: spec.json, checkpoint.pt, train_log.csv, the best weights.
+    seed : int
+        Seeds the data (cells, order, crops) and the initial weights.
+    steps, batch, crop : int
+        Optimiser steps, items per step, side of the square training crops (pixels).
+    optimizer : ``"adamw"`` or ``"adam"``
+        With ``weight_decay`` (AdamW only).
+    lr, lr_min, warmup : float, float or None, int
+        The schedule (:func:`learning_rate`): linear warm-up over ``warmup`` steps to ``lr``, then a
+        cosine down to ``lr_min`` at ``steps``, or constant when ``lr_min`` is None.
+    val_every, checkpoint_every : int
+        Steps between validations (a better score exports the weights) and between checkpoints.
+    threads : int or None
+        torch threads (None: as the process has them).
+    precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
+        Autocast precision (:func:`neuspike.learned.resolve_precision`; auto = bfloat16 where the CPU
+        computes it natively).
+    params : dict
+        Overrides of the method's registered parameters.
+    init_from : str or None
+        Weights (a ``.safetensors`` of the full module) to start from instead of a fresh
+        initialisation; a checkpoint in ``out_dir`` still wins.
+    export : bool
+        Also write the best weights into the package's ``neuspike/trained/``.
+    export_dir : str or None
+        Also write the best weights into this folder.
+    """
+
+    method: str = "neuspike-net"
+    data: DataSection = field(default_factory=WindowData)
+    out_dir: str = "runs/neuspike-net"
+    seed: int = 0
+    steps: int = 9000
+    batch: int = 8
+    crop: int = 128
+    optimizer: str = "adamw"
+    lr: float = 5e-4
+    lr_min: float | None = 1e-5
+    warmup: int = 200
+    weight_decay: float = 1e-4
+    val_every: int = 250
+    checkpoint_every: int = 100
+    threads: int | None = 1
+    precision: str = "auto"
+    params: dict[str, Any] = field(default_factory=dict)
+    init_from: str | None = None
+    export: bool = False
+    export_dir: str | None = None
+
+    #: Fields that do not change what a run computes: a resumed run may change them.
+    NOT_IDENTITY: ClassVar[tuple[str, ...]] = ("out_dir", "threads", "export", "export_dir")
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        if not isinstance(self.data, (WindowData, SequenceData)):
+            raise InputError(f"data: expected WindowData or SequenceData, got {type(self.data).__name__}")
+        _whole("seed", self.seed, 0)
+        for name in ("steps", "batch", "crop", "val_every", "checkpoint_every"):
+            _whole(name, getattr(self, name), 1)
+        _whole("warmup", self.warmup, 0)
+        if self.threads is not None:
+            _whole("threads", self.threads, 1)
+        if self.optimizer not in ("adamw", "adam"):
+            raise InputError(f"optimizer: expected adamw or adam, got {self.optimizer!r}")
+        if not (isinstance(self.lr, (int, float)) and math.isfinite(self.lr) and self.lr > 0):
+            raise InputError(f"lr: expected a positive number, got {self.lr!r}")
+        if self.lr_min is not None and not 0 <= self.lr_min <= self.lr:
+            raise InputError(f"lr_min: expected 0 <= lr_min <= lr ({self.lr}), got {self.lr_min}")
         if self.precision not in ("auto", "float32", "bfloat16"):
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
+        if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
+            raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
+        if isinstance(self.data, WindowData):
+            if self.crop > self.data.view:
+                raise InputError(f"crop: {self.crop} is larger than the simulated view {self.data.view}")
+            if self.crop % 8:
+                raise InputError(f"crop: expected a multiple of 8, got {self.crop}")
+        elif not 8 <= self.crop <= self.data.size:
+            raise InputError(f"crop: expected 8..{self.data.size}, got {self.crop}")
+        put(self, "params", dict(self.params))
+
+    @property
+    def kind(self) -> str:
+        """``"windows"`` or ``"sequences"``."""
+        return self.data.kind
 
     def as_dict(self) -> dict[str, Any]:
-        out = asdict(self)
-        for k in ("light_range", "motions", "noise_levels", "photos"):
-            out[k] = list(out[k])
+        """Plain JSON data (tuples as lists); the data section carries its ``kind``."""
+        out = json.loads(json.dumps(asdict(self)))
+        out["data"] = {"kind": self.data.kind, **out["data"]}
         return out
 
-    def data_key(self) -> dict[str, Any]:
-        """What the simulated data depends on (a shard is reused only when this matches)."""
-        return {k: v for k, v in self.as_dict().items()
-                if k in ("seed", "view", "light_range", "motions", "noise_levels", "photos")}
-        # (shard_size and val_size only say how many of the same deterministic cells exist)
+    def identity(self) -> dict[str, Any]:
+        """What a resumed run must share with the run folder's spec (:data:`NOT_IDENTITY` left out,
+        and the data section's worker count and shard root, which change no byte)."""
+        d = self.as_dict()
+        for k in self.NOT_IDENTITY:
+            d.pop(k)
+        d["data"].pop("workers", None)
+        d["data"].pop("shard_root", None)
+        return d
 
 
-def load_spec(path: str | Path) -> TrainSpec:
-    """A spec from its JSON file (unknown keys are an error)."""
-    data = json.loads(Path(path).read_text())
-    known = {f.name for f in fields(TrainSpec)}
+def learning_rate(spec: TrainSpec, step: int) -> float:
+    """The rate of step ``step`` (from 0): linear warm-up to ``spec.lr`` over ``max(1, spec.warmup)``
+    steps, then constant (``lr_min`` None) or a cosine from ``lr`` down to ``lr_min`` at ``spec.steps``."""
+    warm = max(1, spec.warmup)
+    if step < warm:
+        return spec.lr * (step + 1) / warm
+    if spec.lr_min is None:
+        return spec.lr
+    frac = min(1.0, (step - warm) / max(1, spec.steps - warm))
+    return spec.lr_min + 0.5 * (spec.lr - spec.lr_min) * (1.0 + math.cos(math.pi * frac))
+
+
+# --- reading spec files, the earlier trainers' included -------------------------------------------
+
+_OLD_WINDOW_KEYS = {"shard_dir", "shard_size", "val_size", "view", "light_range", "motions", "noise_levels",
+                    "photos", "workers", "ssim_weight", "ssim_window", "spike_only_fraction"}
+
+
+def _strict(cls: type, data: Mapping[str, Any], where: str) -> Any:
+    known = {f.name for f in fields(cls)}
     unknown = sorted(set(data) - known)
     if unknown:
-        raise InputError(f"{path}: unknown spec keys {unknown}")
-    return TrainSpec(**data)
+        raise InputError(f"{where}: unknown spec keys {unknown}")
+    return cls(**data)
+
+
+def _data_section(d: Mapping[str, Any], where: str) -> DataSection:
+    d = dict(d)
+    kind = d.pop("kind", None)
+    if kind not in DATA_KINDS:
+        raise InputError(f"{where}: data.kind must be one of {sorted(DATA_KINDS)}, got {kind!r}")
+    if d.get("view") is not None and kind == "sequences":
+        d["view"] = tuple(d["view"])
+    return _strict(DATA_KINDS[kind], d, f"{where} (data)")
+
+
+def spec_from_dict(d: Mapping[str, Any], *, where: str = "spec", out_dir: str | None = None) -> TrainSpec:
+    """A :class:`TrainSpec` from its JSON data, or from a spec file of the earlier trainers.
+
+    * the current form: ``data`` is a mapping with ``kind``;
+    * the single-window trainer's flat spec (``shard_dir``, ``shard_size``, ``val_size``, ...):
+      its data fields move into :class:`WindowData`, the optimiser was AdamW;
+    * the sequence trainer's spec (``data`` without ``kind``, ``lr_warmup_steps``, ``train_items``,
+      ...): its counts and loss weights move into :class:`SequenceData`, the optimiser was Adam
+      without weight decay, threads were not part of it. Its fields added later (``lr_min``,
+      ``view``, ``hdr_fraction``, ...) take their defaults.
+
+    ``out_dir`` fills the run folder where the file does not name one (the sequence trainer's).
+    Unknown keys are an error.
+    """
+    d = dict(d)
+    if isinstance(d.get("data"), Mapping) and "kind" in d["data"]:
+        d["data"] = _data_section(d["data"], where)
+        return _strict(TrainSpec, d, where)
+    if isinstance(d.get("data"), Mapping):  # the sequence trainer's spec
+        data = dict(d.pop("data"))
+        for old, new in (("train_items", "train_items"), ("val_items", "val_items"), ("length", "length"),
+                         ("warmup", "warmup_windows"), ("l1", "l1"), ("ssim", "ssim"), ("temporal", "temporal"),
+                         ("occlusion_alpha", "occlusion_alpha")):
+            if old in d:
+                data[new] = d.pop(old)
+        if data.get("view") is not None:
+            data["view"] = tuple(data["view"])
+        seq = _strict(SequenceData, data, f"{where} (data)")
+        if "lr_warmup_steps" in d:
+            d["warmup"] = d.pop("lr_warmup_steps")
+        base = {"optimizer": "adam", "weight_decay": 0.0, "lr_min": None, "threads": None, "warmup": 50,
+                "lr": 2e-4, "steps": 2000, "batch": 4, "crop": 96, "val_every": 100, "checkpoint_every": 25}
+        base.update(d)
+        base.setdefault("out_dir", out_dir or f"runs/{d.get('method')}")
+        base["data"] = seq
+        return _strict(TrainSpec, base, where)
+    data = {k: d.pop(k) for k in list(d) if k in _OLD_WINDOW_KEYS}  # the single-window trainer's flat spec
+    if "shard_size" in data:
+        data["train_items"] = data.pop("shard_size")
+    if "val_size" in data:
+        data["val_items"] = data.pop("val_size")
+    d["data"] = _strict(WindowData, data, f"{where} (data)")
+    return _strict(TrainSpec, d, where)
+
+
+def load_spec(path: str | Path, *, out_dir: str | None = None) -> TrainSpec:
+    """A spec from its JSON file (any of the forms :func:`spec_from_dict` reads; unknown keys are an error)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable spec file ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected a JSON object")
+    return spec_from_dict(data, where=str(path), out_dir=out_dir)
+
+
+def with_out_dir(spec: TrainSpec, out_dir: str) -> TrainSpec:
+    """``spec`` run in another folder."""
+    return replace(spec, out_dir=str(out_dir))

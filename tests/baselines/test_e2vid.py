@@ -13,7 +13,8 @@ from baselines.firenet import FireNet, FireNetModule
 from neuspike.conditions import Condition
 from neuspike.methods import create, entry
 from neuspike.scenes import SceneSpec
-from neuspike.simulate import SensorConfig, simulate_sample
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
 from neuspike.weights import save_safetensors
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -97,7 +98,7 @@ def pan_sample():
 
 def test_registry_entries_load_our_weights_strictly(weights_dir):
     for name, cls in (("e2vid", E2VID), ("firenet-sim", FireNet)):
-        assert entry(name).weights.endswith(".safetensors")
+        assert entry(name).weights.file.endswith(".safetensors")
         m = create(name, weights_dir=weights_dir, precision="float32")
         assert type(m) is cls and m.weights_path.parent == weights_dir and m.layout == "safetensors"
     bad = weights_dir / "bad"
@@ -131,7 +132,7 @@ def test_output_after_warm_up_does_not_depend_on_where_history_started(name, pan
     10 windows changes the image by at most :data:`HISTORY_TOLERANCE` on average."""
     from neuspike.weights import PACKAGE_WEIGHTS
 
-    if not (PACKAGE_WEIGHTS / entry(name).weights).is_file():
+    if not (PACKAGE_WEIGHTS / entry(name).weights.file).is_file():
         pytest.skip(f"no shipped {name} weights")
     long = create(name, precision="float32", max_windows=20)
     short = create(name, precision="float32", max_windows=10)

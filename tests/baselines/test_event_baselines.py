@@ -52,7 +52,8 @@ def local_registry() -> dict:
 
     def register(name, factory, *, params=None, inputs=None, description="", weights=None):
         assert name not in entries
-        entries[name] = (factory, dict(params or {}, **({"weights_file": weights} if weights else {})))
+        given = {"weights_file": weights.file, "weights_subdirs": weights.subdirs} if weights else {}
+        entries[name] = (factory, dict(params or {}, **given))
 
     for module in (event_module, firenet_module, fusion_module):
         module.register_methods(register)

@@ -25,13 +25,13 @@ from baselines.firenet import (
 )
 from neuspike.conditions import Condition
 from neuspike.errors import FormatError, InputError
-from neuspike.methods import MethodUnavailable
+from neuspike.methods import MethodUnavailable, create
 from neuspike.weights import PACKAGE_WEIGHTS, WEIGHTS_ENV, WeightsNotFound, resolve_weights
 from neuspike.metrics import ssim
 from neuspike.representations import event_windows
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import simulate_window
+from neuspike.simulation.window import simulate_window
 from neuspike.streams import EventStream
 from tests.shared_data import SHARED
 
@@ -158,8 +158,8 @@ def test_missing_weights_make_the_method_unavailable(monkeypatch, tmp_path):
         FireNet(weights_file="firenet.pt", normalize=True)
     assert isinstance(info.value, MethodUnavailable)
     with pytest.raises(WeightsNotFound, match="not found") as info:
-        FireNet(weights_file="firenet.pt", normalize=True, weights_dir=tmp_path)
-    # every path tried is named: the sub-folder, the folder, the package's own weights
+        create("firenet", weights_dir=tmp_path)
+    # every path tried is named: the entry's sub-folder, the folder, the package's own weights
     for path in (tmp_path / "firenet" / "firenet.pt", tmp_path / "firenet.pt", PACKAGE_WEIGHTS / "firenet.pt"):
         assert str(path) in str(info.value)
 
@@ -168,7 +168,7 @@ def test_missing_weights_make_the_method_unavailable(monkeypatch, tmp_path):
 def test_weights_are_found_in_the_folder_or_its_firenet_subfolder():
     assert resolve_weights("firenet.pt", WEIGHTS, subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet.pt"
     assert resolve_weights("firenet_plus.pt", WEIGHTS / "firenet", subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet_plus.pt"
-    assert FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS).parameter_count() == PARAMETERS
+    assert FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet").parameter_count() == PARAMETERS
 
 
 def test_invalid_parameters_raise():
@@ -182,7 +182,7 @@ def test_invalid_parameters_raise():
 
 @needs_weights
 def test_state_resets_between_sequences():
-    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS)
+    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")
     rng = np.random.default_rng(1)
     grids = [random_grid(rng, 20, 24) for _ in range(4)]
     first = [method.step(g) for g in grids]
@@ -211,7 +211,7 @@ def test_event_windows_tile_time_backwards_from_the_end():
 @needs_weights
 def test_reconstruct_uses_fixed_count_windows_up_to_the_key_instant():
     h, w = 20, 30
-    method = FireNet(weights_file="firenet_plus.pt", normalize=False, weights_dir=WEIGHTS, max_windows=50)
+    method = FireNet(weights_file="firenet_plus.pt", normalize=False, weights_dir=WEIGHTS / "firenet", max_windows=50)
     rng = np.random.default_rng(2)
     n = 1000
     t = np.sort(rng.uniform(-0.01, 0.002, n))
@@ -241,7 +241,7 @@ def pan_sample():
 @needs_weights
 @pytest.mark.parametrize("file_name, normalize", [("firenet.pt", True), ("firenet_plus.pt", False)])
 def test_after_warm_up_firenet_beats_event_integration(pan_sample, file_name, normalize):
-    method = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS)
+    method = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS / "firenet")
     image = method.reconstruct(pan_sample)
     assert method.windows_used == 24  # warmed up on the full 24 windows of history
     baseline = event_module.EventIntegration().reconstruct(pan_sample)
@@ -249,14 +249,14 @@ def test_after_warm_up_firenet_beats_event_integration(pan_sample, file_name, no
     ours, theirs = ssim(image, gt, data_range=1.0), ssim(baseline, gt, data_range=1.0)
     assert ours > theirs + 0.1, (ours, theirs)
     # without warm-up (a single window) it is worse
-    cold = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS, max_windows=1)
+    cold = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS / "firenet", max_windows=1)
     assert ssim(cold.reconstruct(pan_sample), gt, data_range=1.0) < ours
 
 
 @needs_weights
 def test_bfloat16_stays_close_to_float32(pan_sample):
-    exact = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS, max_windows=8)
-    fast = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS, max_windows=8,
+    exact = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet", max_windows=8)
+    fast = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet", max_windows=8,
                    precision="bfloat16")
     a, b = exact.reconstruct(pan_sample), fast.reconstruct(pan_sample)
     assert np.abs(a - b).mean() < 0.02
@@ -286,5 +286,5 @@ def test_auto_precision_follows_the_cpu_and_is_recorded(monkeypatch, native, exp
     import neuspike.learned as learned
 
     monkeypatch.setattr(learned, "native_bfloat16", lambda: native)
-    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS)
+    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")
     assert method.params["precision"] == expected

@@ -25,7 +25,7 @@ from neuspike.errors import InputError
 from neuspike.metrics import ssim
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import simulate_window
+from neuspike.simulation.window import simulate_window
 from neuspike.streams import EventStream, SpikeStream
 
 RATE_HZ = 20_000.0

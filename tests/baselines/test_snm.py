@@ -107,7 +107,7 @@ def test_converged_neuron_sits_at_the_analytic_steady_state(period):
     tau_planes = tau_ms * RATE_HZ / 1000.0
     num_planes = period * int(25 * tau_planes / period + 1)
     planes = periodic(period, num_planes, np.full((3, 4), period - 1))
-    state = snm.snm_state(planes, num_planes - 1, plane_rate_hz=RATE_HZ, threshold_time_constant_ms=tau_ms)
+    state = snm.snm_state(planes, num_planes - 1, snm.SNMParams(threshold_time_constant_ms=tau_ms), plane_rate_hz=RATE_HZ)
     expected = snm.threshold_steady_state_mv(1.0 / period, time_constant_planes=tau_planes)
     np.testing.assert_allclose(state.threshold_excess_mv.numpy(), expected, rtol=1e-4)
     np.testing.assert_allclose(state.mass.numpy(), snm.steady_state_mass(tau_planes), rtol=1e-4)
@@ -137,7 +137,7 @@ def test_dark_pixels_without_a_complete_isi_are_unbiased(rng, isi_planes):
     # single-spike read-out T / (2 G^2) makes the mean over random phases 1 / ISI; its spread per
     # pixel is at most about 2 / ISI, so over 64 x 64 pixels the mean's standard error is < 3 %.
     planes = constant_scene(1.0 / isi_planes, 1.0, (256, 64, 64), rng)
-    rate = snm.snm_rate(planes, 128, plane_rate_hz=RATE_HZ, coupling_length_px=0.0)
+    rate = snm.snm_rate(planes, 128, snm.SNMParams(coupling_length_px=0.0), plane_rate_hz=RATE_HZ)
     assert float(rate.mean()) * isi_planes == pytest.approx(1.0, abs=0.08)
 
 
@@ -155,7 +155,8 @@ def test_time_constants_are_in_milliseconds_of_sensor_time(rng):
     radiance = rng.uniform(0.1, 1.0, (256, 10, 12))
     planes = integrate_and_fire(radiance, 0.25, rng.uniform(0, 1, (10, 12)))
     a = snm.snm_rate(planes, 128, plane_rate_hz=20_000.0)
-    b = snm.snm_rate(planes, 128, plane_rate_hz=40_000.0, threshold_time_constant_ms=10.0, stdp_time_constant_ms=5.0)
+    b = snm.snm_rate(planes, 128, snm.SNMParams(threshold_time_constant_ms=10.0, stdp_time_constant_ms=5.0),
+                     plane_rate_hz=40_000.0)
     np.testing.assert_array_equal(a, b)
     c = snm.snm_rate(planes, 128, plane_rate_hz=40_000.0)
     assert not np.array_equal(a, c)
@@ -374,8 +375,10 @@ def test_registers_snm_with_spike_input():
     ],
 )
 def test_bad_parameters_raise(params):
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=next(iter(params))):
         snm.SNM(**params)
+    with pytest.raises(InputError, match=next(iter(params))):
+        snm.SNMParams(**params)
 
 
 @pytest.mark.parametrize(
@@ -398,7 +401,8 @@ def simulated_window(kind: str, light: float, seed: int) -> np.ndarray:
     """A 128-plane window of the suite's simulator (pan or still photograph, 40x24, random charge)."""
     from neuspike.conditions import Condition, effect
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import SensorConfig, simulate_window
+    from neuspike.simulation.recording import SensorConfig
+    from neuspike.simulation.window import simulate_window
 
     scene = make_scene(SceneSpec(kind=kind, image="camera", size=(40, 24), velocity_px_s=(6000.0, 1600.0)))
     cond = Condition(light=light, motion=32, effects=(effect("initial_charge"),))
@@ -441,16 +445,16 @@ def test_compiled_kernel_matches_the_torch_reference(kind, light):
 def test_compiled_kernel_matches_with_other_parameters(params, rng):
     planes = rng.random((96, 9, 13)) < rng.uniform(0.02, 0.4, (9, 13))
     for key in (0, 47, 95):
-        fast = snm.snm_rate(planes, key, plane_rate_hz=RATE_HZ, backend="numba", **params)
-        ref = snm.snm_rate(planes, key, plane_rate_hz=RATE_HZ, backend="torch", **params)
+        fast = snm.snm_rate(planes, key, snm.SNMParams(**params), plane_rate_hz=RATE_HZ, backend="numba")
+        ref = snm.snm_rate(planes, key, snm.SNMParams(**params), plane_rate_hz=RATE_HZ, backend="torch")
         np.testing.assert_allclose(fast, ref, rtol=0, atol=RATE_ATOL)
 
 
 def test_a_memory_beyond_the_compiled_range_takes_the_reference_path(rng):
     # motion_memory_isi 0.5: the moving decay's argument spans more than the compiled series covers
     planes = rng.random((64, 5, 6)) < 0.3
-    fast = snm.snm_rate(planes, 31, plane_rate_hz=RATE_HZ, backend="numba", motion_memory_isi=0.5)
-    ref = snm.snm_rate(planes, 31, plane_rate_hz=RATE_HZ, backend="torch", motion_memory_isi=0.5)
+    fast = snm.snm_rate(planes, 31, snm.SNMParams(motion_memory_isi=0.5), plane_rate_hz=RATE_HZ, backend="numba")
+    ref = snm.snm_rate(planes, 31, snm.SNMParams(motion_memory_isi=0.5), plane_rate_hz=RATE_HZ, backend="torch")
     np.testing.assert_array_equal(fast, ref)
 
 

@@ -19,7 +19,7 @@ import baselines.tfp as tfp_module
 import baselines.tfstp as tfstp_module
 from baselines.tfi import TFI, planes_to_first_spike, tfi_isi_planes, tfi_rate
 from baselines.tfp import TFP, tfp_rate, tfp_window
-from baselines.tfstp import TFSTP, stp_rates, stp_step, tfstp_rate, tfstp_state
+from baselines.tfstp import TFSTP, STPParams, stp_rates, stp_step, tfstp_rate, tfstp_state
 from neuspike.errors import InputError
 from neuspike.sample import Sample
 from neuspike.streams import SpikeStream
@@ -109,8 +109,12 @@ def test_invalid_parameters_raise():
             TFP(window=bad)
     bad_stp = ({"u0": 1.0}, {"u0": 0.0}, {"facilitation": 1.5}, {"recovery_planes": -1.0}, {"facilitation_planes": 1e9})
     for kwargs in bad_stp:
-        with pytest.raises(InputError):
+        with pytest.raises(InputError, match=next(iter(kwargs))):
             TFSTP(**kwargs)
+        with pytest.raises(InputError, match=next(iter(kwargs))):
+            STPParams(**kwargs)
+    with pytest.raises(InputError, match="STPParams"):
+        tfstp_rate(np.zeros((4, 3, 3), dtype=bool), 1, {"u0": 0.2})
     planes = np.zeros((4, 3, 3), dtype=bool)
     with pytest.raises(InputError):
         tfp_rate(planes.astype(np.uint8), 1, None)
@@ -270,10 +274,10 @@ def closed_form_steady_state(isi, u0, recovery_planes, facilitation_planes, faci
 def test_tfstp_readout_inverts_its_own_steady_state(isi, params):
     q, v = np.zeros(1), np.zeros(1)
     for _ in range(400):
-        q, v = stp_step(q, v, float(isi), **params)
+        q, v = stp_step(q, v, float(isi), STPParams(**params))
     q_star, v_star = closed_form_steady_state(isi, **params)
     np.testing.assert_allclose([q[0], v[0]], [q_star, v_star], rtol=1e-12)
-    rate_r, rate_u = stp_rates(q, v, **params)
+    rate_r, rate_u = stp_rates(q, v, STPParams(**params))
     np.testing.assert_allclose([rate_r[0], rate_u[0]], [1.0 / isi, 1.0 / isi], rtol=1e-11)
     if isi <= 7:  # R itself is representable: the textbook forms in R and u agree
         r, u = 1.0 - q_star, params["u0"] + v_star
@@ -375,7 +379,7 @@ def simulated_window(kind: str, light: float, seed: int) -> np.ndarray:
     """A 256-plane window of the suite's simulator (pan or still photograph, 64x40, random charge)."""
     from neuspike.conditions import Condition, effect
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import simulate_window
+    from neuspike.simulation.window import simulate_window
 
     scene = make_scene(SceneSpec(kind=kind, image="camera", size=(64, 40), velocity_px_s=(3000.0, 800.0)))
     cond = Condition(light=light, motion=64, effects=(effect("initial_charge"),))
@@ -405,9 +409,9 @@ def test_tfstp_compiled_pass_on_long_windows_and_edge_cases():
     for key in (62, 63, 64, 127, 128, 299):
         np.testing.assert_array_equal(tfstp_rate(planes, key, backend="numba"),
                                       tfstp_rate(planes, key, backend="numpy"))
-    params = {"u0": 0.5, "recovery_planes": 3.0, "facilitation_planes": 40.0, "facilitation": 0.6}
-    np.testing.assert_array_equal(tfstp_rate(planes, 200, backend="numba", **params),
-                                  tfstp_rate(planes, 200, backend="numpy", **params))
+    params = STPParams(u0=0.5, recovery_planes=3.0, facilitation_planes=40.0, facilitation=0.6)
+    np.testing.assert_array_equal(tfstp_rate(planes, 200, params, backend="numba"),
+                                  tfstp_rate(planes, 200, params, backend="numpy"))
     with pytest.raises(InputError, match="backend"):
         tfstp_rate(planes, 5, backend="torch")
 

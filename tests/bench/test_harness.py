@@ -16,13 +16,14 @@ import pandas as pd
 import pytest
 
 from bench import grid as grids
-from neuspike.cache import load_recording, save_recording
+from neuspike.simulation.cache import load_recording, save_recording
 from bench.cells import METRICS, forget_plugin, load_plugins
 from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
-from bench.sweep import ConfigMismatch, Execution, SweepSpec, main, run_sweep
+from bench.harness import ConfigMismatch, Execution, SweepSpec, run_sweep
+from bench.sweep import main
 from neuspike import methods as registry
 from neuspike.errors import InputError
-from neuspike.simulate import SensorConfig
+from neuspike.simulation.recording import SensorConfig
 
 PLANES = 32
 SIZE = (32, 24)
@@ -279,7 +280,7 @@ def test_changed_config_is_refused_unless_forced(plugin, tmp_path):
 def test_cache_round_trip_is_bit_exact(tmp_path):
     from neuspike.rng import derive_rng
     from neuspike.scenes import make_scene
-    from neuspike.simulate import simulate_window
+    from neuspike.simulation.window import simulate_window
 
     cell = tiny_grid(lights=(0.25,), motions=(8,)).cells()[0]
     rec = simulate_window(make_scene(cell.scene.spec), cell.condition, rng=derive_rng(0, "t"),
@@ -305,8 +306,8 @@ def test_cache_round_trip_is_bit_exact(tmp_path):
 DRIVER = textwrap.dedent('''
     import sys
     from bench import grid as grids
-    from bench.sweep import Execution, SweepSpec, run_sweep
-    from neuspike.simulate import SensorConfig
+    from bench.harness import Execution, SweepSpec, run_sweep
+    from neuspike.simulation.recording import SensorConfig
 
     plugin, out = sys.argv[1], sys.argv[2]
     grid = grids.Grid(scenes=(grids.scene_entry("pan:camera", (32, 24)),), lights=(0.25, 0.5, 1.0),

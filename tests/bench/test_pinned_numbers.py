@@ -13,10 +13,10 @@ import pytest
 from bench import grid as grids
 from bench.cells import WorkerSetup
 from bench.results import read_csv
-from bench.sweep import Execution, SweepSpec, resolve_methods, run_sweep
+from bench.harness import Execution, SweepSpec, resolve_methods, run_sweep
 from neuspike import methods as registry
 from neuspike.methods import Method, MethodUnavailable
-from neuspike.simulate import SensorConfig
+from neuspike.simulation.recording import SensorConfig
 
 METHODS = ("tfp-w32", "tfi", "events-integrate", "fusion-complementary")
 PINNED = {

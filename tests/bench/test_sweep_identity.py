@@ -10,12 +10,13 @@ import pytest
 from bench import cells
 from bench import grid as grids
 from bench.results import read_csv
-from bench.sweep import ConfigMismatch, Execution, SweepSpec, cell_id, main, resolve_methods, run_sweep
+from bench.harness import ConfigMismatch, Execution, SweepSpec, cell_id, resolve_methods, run_sweep
+from bench.sweep import main
 from bench.cells import WorkerSetup
 from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable, create_many
-from neuspike.simulate import SensorConfig
+from neuspike.simulation.recording import SensorConfig
 from tests.bench.test_timing import Unavailable
 
 NAME = "zz-learned"

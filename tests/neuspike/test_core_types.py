@@ -10,12 +10,12 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from neuspike import methods as registry
-from neuspike.cache import recording_key
+from neuspike.simulation.cache import part_key
 from neuspike.conditions import EFFECT_DEFAULTS, NOISE_LEVELS, Condition, effect, parse_effects
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.scenes import SceneSpec
-from neuspike.simulate import SensorConfig
+from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 
 # --- parse_effects ------------------------------------------------------------------------------
@@ -132,8 +132,7 @@ def test_registry_entries_variants_and_errors():
 # --- recording cache key -------------------------------------------------------------------------
 
 SPEC = SceneSpec(kind="pan", image="camera", size=(32, 24))
-BASE = dict(scene_spec=SPEC, condition=Condition(), sensor=SensorConfig(), seed=0,
-            modalities=("spikes", "events"), history_s=0.0)
+BASE = dict(scene_spec=SPEC, condition=Condition(), sensor=SensorConfig(), seed=0, modality="events", history_s=0.0)
 
 
 @pytest.mark.parametrize("change", [
@@ -148,13 +147,15 @@ BASE = dict(scene_spec=SPEC, condition=Condition(), sensor=SensorConfig(), seed=
     dict(sensor=SensorConfig(event_threshold=0.3)),
     dict(sensor=SensorConfig(spike_threshold=2.0)),
     dict(seed=1),
-    dict(modalities=("spikes",)),
+    dict(modality="spikes"),
     dict(history_s=0.01),
 ])
 def test_the_cache_key_changes_whenever_a_recording_would(change):
-    assert recording_key(**{**BASE, **change}) != recording_key(**BASE)
+    assert part_key(**{**BASE, **change}) != part_key(**BASE)
 
 
 def test_the_cache_key_ignores_what_does_not_change_a_recording():
-    assert recording_key(**BASE) == recording_key(**{**BASE, "modalities": ("events", "spikes")})
-    assert recording_key(**BASE) == recording_key(**{**BASE, "condition": Condition(light=np.float64(0.25))})
+    assert part_key(**BASE) == part_key(**{**BASE, "condition": Condition(light=np.float64(0.25))})
+    # the spike window has no history: its part serves a request with any
+    spikes = {**BASE, "modality": "spikes"}
+    assert part_key(**spikes) == part_key(**{**spikes, "history_s": 0.01})

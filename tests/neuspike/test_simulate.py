@@ -11,7 +11,10 @@ from neuspike.conditions import Condition, effect
 from neuspike.errors import InputError
 from neuspike.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import SensorConfig, main, simulate_window, write_sequence
+from neuspike.simulate import main
+from neuspike.simulation.recording import SensorConfig
+from neuspike.simulation.window import simulate_window
+from neuspike.simulation.writing import write_sequence
 
 SMALL = (48, 32)
 
@@ -188,7 +191,7 @@ def test_a_motion_scale_that_does_not_fit_the_window_names_both_options(tmp_path
 # --- static region ---------------------------------------------------------------------------------
 
 def test_static_region_of_each_kind():
-    from neuspike.simulate import static_region
+    from neuspike.simulation.window import static_region
 
     sensor, cond = SensorConfig(planes=64), Condition(noise="none", motion=32)
     still = static_region(SceneSpec(kind="still", image="camera", size=SMALL), cond, sensor=sensor)
@@ -204,7 +207,7 @@ def test_static_region_of_each_kind():
 
 def test_static_region_is_where_no_event_fires():
     """Independent check: with no noise, the pixels it calls static see no event, history included."""
-    from neuspike.simulate import static_region
+    from neuspike.simulation.window import static_region
 
     spec = SceneSpec(kind="fan", image="coins", size=SMALL)
     sensor, cond = SensorConfig(planes=64), Condition(noise="none", motion=32)

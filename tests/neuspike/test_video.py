@@ -170,7 +170,7 @@ def test_scene_ground_truth_follows_time_scale(tmp_path):
     from neuspike.conditions import Condition
     from neuspike.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import write_sequence
+    from neuspike.simulation.writing import write_sequence
 
     scene = make_scene(SceneSpec(kind="pan", size=(48, 32), velocity_px_s=(2000.0, 0.0)))
     write_sequence(scene, Condition(light=0.25, motion=128), tmp_path, rng=derive_rng(0, "t"), start_s=0.3,
@@ -204,7 +204,7 @@ def test_command_writes_videos_frames_and_metrics(tmp_path, rng):
     from neuspike.conditions import Condition
     from neuspike.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import write_sequence
+    from neuspike.simulation.writing import write_sequence
 
     sim = tmp_path / "sim"
     scene = make_scene(SceneSpec(kind="fan", size=(48, 32), rpm=2600.0))
@@ -292,7 +292,7 @@ def test_firenet_carries_its_state_between_frames(tmp_path, one_torch_thread):
     from neuspike.metrics import ssim
     from neuspike.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
-    from neuspike.simulate import write_sequence
+    from neuspike.simulation.writing import write_sequence
 
     scene = make_scene(SceneSpec(kind="pan", size=(64, 48), velocity_px_s=(400.0, 0.0)))
     write_sequence(scene, Condition(light=0.25, motion=128), tmp_path, rng=derive_rng(0, "f"), start_s=0.0,

@@ -108,7 +108,7 @@ def weights_dir(tmp_path):
     torch.manual_seed(0)
     for name, spike_only in (("neuspike-net", False), ("neuspike-net-spike", True)):
         params = {**DEFAULT_DESIGN, "spike_only": spike_only}
-        module = NeuSpikeNetMethod.module_for(params)
+        module = NeuSpikeNetMethod.for_training(name, **params).module
         save_safetensors(module, tmp_path / f"{name}.safetensors", card={"model": {"params": params}})
     return tmp_path
 
@@ -116,7 +116,7 @@ def weights_dir(tmp_path):
 def test_both_methods_are_registered_with_their_inputs():
     assert entry("neuspike-net").inputs == {"spikes", "events"}
     assert entry("neuspike-net-spike").inputs == {"spikes"}
-    assert entry("neuspike-net").weights == "neuspike-net.safetensors"
+    assert entry("neuspike-net").weights.file == "neuspike-net.safetensors"
 
 
 def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_thread):
@@ -136,14 +136,15 @@ def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
     with pytest.raises(InputError, match="events"):
         method.reconstruct(make_sample(events=False))
     with pytest.raises(InputError, match="no events"):
-        NeuSpikeNetMethod.encode_sample(make_sample(events=False), {**DEFAULT_DESIGN, "spike_only": False})
+        NeuSpikeNetMethod.for_training("neuspike-net", **DEFAULT_DESIGN, spike_only=False).encode(
+            make_sample(events=False))
     spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
     assert spike.reconstruct(make_sample(events=False)).shape == (H, W)
 
 
 def test_weights_of_the_wrong_shape_are_a_format_error(tmp_path):
     params = {**DEFAULT_DESIGN, "spike_only": False}
-    state = NeuSpikeNetMethod.module_for(params).state_dict()
+    state = NeuSpikeNetMethod.for_training("neuspike-net", **params).module.state_dict()
     state["predict.weight"] = torch.zeros(1, 10, 3, 3)
     save_safetensors(state, tmp_path / "neuspike-net.safetensors")
     with pytest.raises(FormatError, match="predict.weight"):

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.errors import InputError
-from neuspike.sensors import event_camera as ec
+from neuspike.sensors import event_capture
 from neuspike.sensors.event_camera import EventCamera, log_intensity
 from neuspike.streams import EventStream
 
@@ -325,7 +325,7 @@ def test_noise_event_resets_the_memorised_level(monkeypatch):
     def inject(self, radiance, dt):
         return np.array([0]), np.array([f_noise]), np.array([False])
 
-    monkeypatch.setattr(ec._Capture, "draw_shot_noise", inject)
+    monkeypatch.setattr(event_capture.Capture, "draw_shot_noise", inject)
     cam = EventCamera(1, 1, light=1.0, threshold_on=theta, threshold_off=theta,
                       effects=(effect("shot_noise", rate_hz=1.0),), rng=np.random.default_rng(0))
     frames = np.array([ln_radiance(start), ln_radiance(start + delta)]).reshape(2, 1, 1)
@@ -378,7 +378,7 @@ def test_noise_resets_match_a_plain_reference(monkeypatch, leak):
         on = np.array([noise[order[0]][1], True, noise[order[1]][1], noise[order[2]][1], False])
         return pix, frac, on
 
-    monkeypatch.setattr(ec._Capture, "draw_shot_noise", inject)
+    monkeypatch.setattr(event_capture.Capture, "draw_shot_noise", inject)
     effects = (effect("shot_noise", rate_hz=1.0),) + ((effect("leak", rate_hz=30.0),) if leak else ())
     cam = EventCamera(4, 1, light=1.0, threshold_on=0.1, threshold_off=0.15, effects=effects,
                       rng=np.random.default_rng(0))

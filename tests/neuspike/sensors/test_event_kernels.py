@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from neuspike.conditions import EVENT_PRESETS, effect
-from neuspike.sensors.backends import NUMBA_AVAILABLE
+from neuspike.parallel import NUMBA_AVAILABLE
 from neuspike.sensors.event_camera import EventCamera
 
 pytestmark = pytest.mark.skipif(not NUMBA_AVAILABLE, reason="numba is not importable")
@@ -105,7 +105,8 @@ def test_a_pixel_whose_log_intensity_does_not_change_across_a_crossing_gives_num
     import neuspike.sensors.event_camera as ec
     from neuspike.conditions import Condition
     from neuspike.scenes import SceneSpec
-    from neuspike.simulate import SensorConfig, simulate_sample
+    from neuspike.simulation.cell import simulate_sample
+    from neuspike.simulation.recording import SensorConfig
 
     original = ec.EventCamera.__init__
     streams = {}
@@ -183,7 +184,8 @@ def test_a_history_boundary_crossing_gives_a_sorted_stream_on_both_backends():
     import neuspike.sensors.event_camera as event_camera
     from neuspike.conditions import Condition
     from neuspike.scenes import SceneSpec
-    from neuspike.simulate import SensorConfig, simulate_sample
+    from neuspike.simulation.cell import simulate_sample
+    from neuspike.simulation.recording import SensorConfig
 
     scene = SceneSpec("fan", image="coffee", size=(128, 128), rpm=-1617.7994873558214, blades=5,
                       blade_width_deg=15.206296815359472, blade_contrast=0.30109810296906725)

@@ -11,27 +11,28 @@ import torch
 
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
-from neuspike.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
-from neuspike.simulate import SensorConfig, simulate_sample
-from neuspike.train.sequences import (
-    Cell,
-    DataSpec,
-    TrainSpec,
-    backward_flow,
-    build_shard,
-    draw_cell,
-    learning_rate,
-    load_shard,
-    make_batch,
-    run_sequence,
-    scene_time,
-    sequence_loss,
-    simulate_item,
-    train,
-    training_method,
-    warp,
-)
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
+from neuspike.scenes.motion import backward_flow, scene_time_s
+from neuspike.train.loop import train
+from neuspike.train.sequences import Cell, draw_cell, make_batch, run_sequence, sequence_loss, simulate_item, warp
+from neuspike.train.spec import SequenceData, TrainSpec, learning_rate
+
+DataSpec = SequenceData
+
+
+def training_method(name: str):
+    """The registered method around a fresh module (what the trainer encodes with)."""
+    from neuspike.methods import entry
+
+    e = entry(name)
+    return e.factory.for_training(name, **dict(e.params))
+
+
+def scene_time(sensor_t_s, condition, sensor):
+    return scene_time_s(sensor_t_s, motion=condition.motion, planes=sensor.planes,
+                        plane_rate_hz=sensor.plane_rate_hz, upsampled_rate_hz=sensor.upsampled_rate_hz)
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -86,7 +87,7 @@ def test_scene_time_maps_frames_and_the_key_instant():
 def tiny():
     """A small pan cell and its item (simulated once for the module)."""
     torch.set_num_threads(1)
-    data = DataSpec(size=40, windows=4, displacement_px=6.0)
+    data = DataSpec(size=40, windows=4, length=4, displacement_px=6.0)
     cell = Cell(SceneSpec("pan", image="brick", size=(40, 40), velocity_px_s=(2500.0, 900.0)),
                 Condition(light=0.25, motion=128, noise="none"), SensorConfig(event_threshold=0.2), 7)
     method = training_method("firenet-sim")
@@ -152,14 +153,13 @@ def test_loss_falls_on_a_fixed_batch(tiny):
     _, _, method, item = tiny
     torch.manual_seed(0)
     module = type(method).for_training("firenet-sim", normalize=True).module.train()
-    spec = TrainSpec(method="firenet-sim", data=DataSpec(size=40, windows=4), crop=24, length=4, warmup=1,
-                     precision="float32")
+    data = DataSpec(size=40, windows=4, length=4, warmup_windows=1)
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
     batch = make_batch(shard, np.random.default_rng(0), batch=1, crop=24, length=4)
     opt = torch.optim.Adam(module.parameters(), lr=1e-2)
     losses = []
     for _ in range(10):
-        loss, parts = sequence_loss(run_sequence(module, batch["voxels"], precision="float32"), batch, spec)
+        loss, parts = sequence_loss(run_sequence(module, batch["voxels"], precision="float32"), batch, data)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -167,55 +167,55 @@ def test_loss_falls_on_a_fixed_batch(tiny):
     assert losses[-1] < 0.8 * losses[0], losses
 
 
-def _tiny_run(steps: int, val_every: int) -> TrainSpec:
+def _tiny_run(steps: int, val_every: int, tmp_path, run: str = "run", **kw) -> TrainSpec:
     """A FireNet run on two 32x32 sequences of 3 windows: seconds on the CPU."""
-    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0)
-    return TrainSpec(method="firenet-sim", data=data, train_items=2, val_items=1, crop=24, batch=2, length=3,
-                     warmup=1, steps=steps, val_every=val_every, checkpoint_every=1, precision="float32",
-                     lr_warmup_steps=1)
+    data = DataSpec(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0,
+                    train_items=2, val_items=1, length=3, warmup_windows=1, shard_root=str(tmp_path / "shards"))
+    return TrainSpec(method="firenet-sim", data=data, out_dir=str(tmp_path / run), crop=24, batch=2,
+                     optimizer="adam", weight_decay=0.0, lr=2e-4, lr_min=None, warmup=1, steps=steps,
+                     val_every=val_every, checkpoint_every=1, precision="float32", threads=None, **kw)
 
 
 def test_resume_gives_the_same_weights_as_one_run(tmp_path):
     """Two steps, stop, two more (resumed from the checkpoint) == four steps in one go: same data order, same bytes."""
-    spec = _tiny_run(steps=4, val_every=2)
-    shards = tmp_path / "shards"
-    one = train(spec, run_dir=tmp_path / "one", shard_root=shards, export_dir=tmp_path / "w1", progress=False)
-    half = dataclasses.replace(spec, steps=2)
-    train(half, run_dir=tmp_path / "two-a", shard_root=shards, export_dir=None, progress=False)
-    (tmp_path / "two").mkdir()
-    import shutil
-
-    shutil.copy(tmp_path / "two-a" / "checkpoint.pt", tmp_path / "two" / "checkpoint.pt")
-    two = train(spec, run_dir=tmp_path / "two", shard_root=shards, export_dir=None, progress=False)
-    assert one["step"] == two["step"] == 4
+    spec = _tiny_run(4, 2, tmp_path, "one", export_dir=str(tmp_path / "w1"))
+    one = train(spec, quiet=True)
+    two_spec = dataclasses.replace(spec, out_dir=str(tmp_path / "two"), export_dir=None)
+    train(two_spec, quiet=True, until=2)  # killed after step 2
+    two = train(two_spec, quiet=True)
+    assert one["step"] == two["step"] == 4 and two["resumed"]
     a = torch.load(tmp_path / "one" / "checkpoint.pt", weights_only=True)["module"]
     b = torch.load(tmp_path / "two" / "checkpoint.pt", weights_only=True)["module"]
     for k in a:
         assert torch.equal(a[k], b[k]), k
     assert (tmp_path / "w1" / "firenet-sim.safetensors").is_file()
+    assert (tmp_path / "one" / "firenet-sim.safetensors").is_file()
     log = (tmp_path / "one" / "train_log.csv").read_text().splitlines()
-    assert len(log) == 5 and log[0].startswith("step,loss")
-    with pytest.raises(InputError, match="different spec"):
-        train(half, run_dir=tmp_path / "one", shard_root=shards, export_dir=None, progress=False)
+    assert log[0].startswith("step,kind") and [r.split(",")[:2] for r in log[1:]] == \
+        [["1", "train"], ["2", "train"], ["2", "val"], ["3", "train"], ["4", "train"], ["4", "val"]]
+    log2 = (tmp_path / "two" / "train_log.csv").read_text().splitlines()
+    assert [r.split(",")[:4] for r in log2] == [r.split(",")[:4] for r in log]
+    with pytest.raises(InputError, match="another spec"):
+        train(dataclasses.replace(spec, steps=2), quiet=True)
 
 
 def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
     """A run continued from exported weights (no checkpoint) starts exactly there; its start's validation is the bar."""
     from neuspike.weights import load_safetensors
 
-    spec = _tiny_run(steps=2, val_every=1)
-    shards = tmp_path / "shards"
-    first = train(spec, run_dir=tmp_path / "a", shard_root=shards, export_dir=tmp_path / "w", progress=False)
+    spec = _tiny_run(2, 1, tmp_path, "a", export_dir=str(tmp_path / "w"))
+    first = train(spec, quiet=True)
     weights = tmp_path / "w" / "firenet-sim.safetensors"
     start = load_safetensors(str(weights))
-    later = dataclasses.replace(spec, steps=0, init_from=str(weights))
-    result = train(later, run_dir=tmp_path / "b", shard_root=shards, export_dir=tmp_path / "w2", progress=False)
+    later = dataclasses.replace(spec, out_dir=str(tmp_path / "b"), steps=1, val_every=5, init_from=str(weights),
+                                export_dir=str(tmp_path / "w2"))
+    result = train(later, quiet=True, until=0)
     state = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["module"]
     assert set(state) == set(start)
     for k in start:
         assert torch.equal(state[k], start[k].to(state[k].dtype)), k
-    assert result["best"]["step"] == 0
-    assert result["best"]["val_ssim"] == pytest.approx(first["best"]["val_ssim"], abs=1e-6)
+    assert result["best"]["main"]["step"] == 0
+    assert result["best"]["main"]["val_ssim"] == pytest.approx(first["best"]["main"]["val_ssim"], abs=1e-6)
     assert not (tmp_path / "w2").exists()  # nothing better than the start: nothing exported
     with pytest.raises(InputError, match="safetensors"):
         dataclasses.replace(spec, init_from="weights.pt")
@@ -223,7 +223,7 @@ def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
 
 def test_learning_rate_warms_up_then_holds_or_follows_a_cosine():
     """Constant after the warm-up without lr_min; with it, the cosine's closed form: peak, half-way mean, floor."""
-    flat = TrainSpec(method="e2vid", lr=2e-4, lr_warmup_steps=50, steps=1050)
+    flat = TrainSpec(method="e2vid", data=SequenceData(), crop=48, lr=2e-4, warmup=50, lr_min=None, steps=1050)
     assert learning_rate(flat, 0) == pytest.approx(2e-4 / 50)
     assert learning_rate(flat, 49) == pytest.approx(2e-4)
     assert learning_rate(flat, 1049) == pytest.approx(2e-4)
@@ -236,14 +236,6 @@ def test_learning_rate_warms_up_then_holds_or_follows_a_cosine():
     assert all(a >= b for a, b in zip(rates, rates[1:]))
     with pytest.raises(InputError, match="lr_min"):
         dataclasses.replace(flat, lr_min=3e-4)
-
-
-def test_a_spec_frozen_before_lr_min_reads_as_a_constant_rate():
-    """Run folders of the first stages hold specs without lr_min: they read back equal, constant rate."""
-    spec = TrainSpec(method="e2vid")
-    old = spec.as_dict()
-    del old["lr_min"]
-    assert TrainSpec.from_dict(old) == spec and spec.lr_min is None
 
 
 def test_backward_flow_of_a_crop_is_the_crop_of_the_views_flow():
@@ -259,7 +251,7 @@ def test_a_view_spec_cuts_items_from_the_larger_view_and_leaves_old_shard_keys_a
     plain = DataSpec()
     assert plain.key() == "f40df6737f28"  # the shard key the first e2vid stages trained on
     rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
-    view = DataSpec(size=40, windows=3, view=(160, 100), kinds=("pan",), noise_levels=("none",))
+    view = DataSpec(size=40, windows=3, length=3, view=(160, 100), kinds=("pan",), noise_levels=("none",))
     assert view.key() != dataclasses.replace(view, view=None).key()
     cell = draw_cell(view, rng_a)
     assert cell.scene.size == (160, 100) and cell.scene.crop[2:] == (40, 40)
@@ -282,7 +274,7 @@ def test_dead_leaves_items_flow_with_the_background_and_the_mask_takes_the_foreg
     mask); the item simulates; a view with dead leaves and an unknown kind are refused."""
     from neuspike.scenes.dead_leaves import DeadLeavesScene
 
-    data = DataSpec(size=48, windows=3, kinds=("dead_leaves",), noise_levels=("none",))
+    data = DataSpec(size=48, windows=3, length=3, kinds=("dead_leaves",), noise_levels=("none",))
     cell = draw_cell(data, np.random.default_rng(7))
     assert cell.scene.kind == "dead_leaves"
     t0, t1 = -0.0012, 0.0003
@@ -322,18 +314,17 @@ def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
     """--kinds / --noise-levels reach the data spec; --snapshot-every keeps every N-th step's weights with a card."""
     import json
 
-    from neuspike.train.sequences import build_parser, spec_from_args
+    from neuspike.train.__main__ import build_parser, spec_from_args
 
     args = build_parser().parse_args(["firenet-sim", "--kinds", "pan,dead_leaves", "--noise-levels", "none,none,high"])
     spec = spec_from_args(args)
     assert spec.data.kinds == ("pan", "dead_leaves") and spec.data.noise_levels == ("none", "none", "high")
-    run = _tiny_run(steps=4, val_every=4)
-    train(run, run_dir=tmp_path / "run", shard_root=tmp_path / "shards", export_dir=None, progress=False,
-          snapshot_every=2)
+    run = _tiny_run(4, 4, tmp_path)
+    train(run, quiet=True, snapshot_every=2)
     snaps = sorted(p.name for p in (tmp_path / "run" / "snapshots").iterdir())
     assert snaps == ["step-00002", "step-00004"]
     card = json.loads((tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.json").read_text())
-    assert card["steps"] == 4 and "val_ssim" in card["validation"]
+    assert card["training"]["step"] == 4 and "val_ssim" in card["validation"]
     last = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)["module"]
     from neuspike.weights import load_safetensors
 
@@ -341,8 +332,7 @@ def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
     for k in last:
         assert torch.equal(kept[k].to(last[k].dtype), last[k]), k
     with pytest.raises(InputError, match="snapshot_every"):
-        train(run, run_dir=tmp_path / "run", shard_root=tmp_path / "shards", export_dir=None, progress=False,
-              snapshot_every=0)
+        train(run, quiet=True, snapshot_every=0)
 
 
 def test_hdr_fraction_sets_the_share_of_high_dynamic_range_items():

@@ -1,4 +1,5 @@
-"""Training: the spec's refusals, deterministic cells and batches, the loss falls, resume reproduces a straight run."""
+"""Single-window training: the spec's refusals, deterministic cells and batches, the loss falls, resume
+reproduces a straight run, a later stage starts from the first."""
 
 import json
 
@@ -7,24 +8,27 @@ import pytest
 import torch
 
 from neuspike.errors import InputError
-from neuspike.train import TrainSpec, load_spec
-from neuspike.train.data import augment, draw_cell, load_sample, save_sample, simulate_cell
-from neuspike.train.loop import Trainer, learning_rate
+from neuspike.train import TrainSpec, WindowData, learning_rate, load_spec
+from neuspike.train.loop import Trainer
+from neuspike.train.windows import augment, draw_cell, load_sample, save_sample, simulate_cell
+
+DATA_FIELDS = set(WindowData.__dataclass_fields__)
 
 
 def tiny_spec(tmp_path, **kw) -> TrainSpec:
     base = dict(out_dir=str(tmp_path / "run"), shard_dir=str(tmp_path / "shard"), steps=4, batch=2, crop=16,
-                view=16, shard_size=3, val_size=2, val_every=2, checkpoint_every=2, warmup=2, workers=1,
+                view=16, train_items=3, val_items=2, val_every=2, checkpoint_every=2, warmup=2, workers=1,
                 precision="float32", threads=1)
     base.update(kw)
-    return TrainSpec(**base)
+    data = WindowData(**{k: base.pop(k) for k in list(base) if k in DATA_FIELDS})
+    return TrainSpec(data=data, **base)
 
 
 def test_the_spec_refuses_test_photographs_and_round_trips(tmp_path):
     with pytest.raises(InputError, match="test photographs"):
-        TrainSpec(photos=("camera", "cat"))
+        WindowData(photos=("camera", "cat"))
     with pytest.raises(InputError, match="crop"):
-        TrainSpec(crop=200, view=128)
+        TrainSpec(crop=200, data=WindowData(view=128))
     spec = tiny_spec(tmp_path)
     (tmp_path / "spec.json").write_text(json.dumps(spec.as_dict()))
     assert load_spec(tmp_path / "spec.json") == spec
@@ -37,7 +41,7 @@ def test_same_seed_same_cells_and_windows(tmp_path):
     kinds = {draw_cell(spec, "train", i, tmp_path)[3]["kind"] for i in range(40)}
     assert {"pan", "zoom", "fan", "dead_leaves"} <= kinds
     lights = [draw_cell(spec, "train", i, tmp_path)[1].light for i in range(40)]
-    assert min(lights) >= spec.light_range[0] and max(lights) <= spec.light_range[1]
+    assert min(lights) >= spec.data.light_range[0] and max(lights) <= spec.data.light_range[1]
     other = tiny_spec(tmp_path, seed=1)
     assert [draw_cell(other, "train", i, tmp_path)[3] for i in range(5)] != \
         [draw_cell(spec, "train", i, tmp_path)[3] for i in range(5)]
@@ -78,10 +82,9 @@ def test_the_loss_falls_on_a_fixed_batch(tmp_path, one_torch_thread):
     spikes = torch.rand(2, 32, 16, 16, generator=g)
     events = torch.randn(2, 32, 16, 16, generator=g)
     target = spikes.mean(dim=1, keepdim=True)
-    losses = []
-    for _ in range(15):
-        losses.append(trainer.train_step([spikes, events], target, spike_only=False)["loss"])
-        trainer.step += 1
+    trainer.task.batch = lambda step: ([spikes, events], target)  # one fixed batch
+    trainer.task.step_variant = lambda step: "fusion"
+    losses = [trainer.train_step()["loss"] for _ in range(15)]
     assert np.mean(losses[-5:]) < 0.7 * np.mean(losses[:3])
 
 
@@ -99,6 +102,9 @@ def test_a_resumed_run_equals_a_straight_run(tmp_path, one_torch_thread):
     log = (tmp_path / "b" / "run" / "train_log.csv").read_text().splitlines()
     steps = [int(r.split(",")[0]) for r in log[1:] if ",train," in r]
     assert steps == [1, 2, 3, 4]
+    straight_log = (tmp_path / "a" / "run" / "train_log.csv").read_text().splitlines()
+    # the same rows (step, kind, variant, loss) as the straight run: none repeated, none lost
+    assert [r.split(",")[:4] for r in log] == [r.split(",")[:4] for r in straight_log]
     assert (tmp_path / "a" / "run" / "neuspike-net.safetensors").exists()
     assert (tmp_path / "a" / "run" / "neuspike-net-spike.safetensors").exists()
 
@@ -117,8 +123,10 @@ def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_
     for k, v in second.module.state_dict().items():  # the exported (bfloat16) weights, cast back
         assert torch.equal(v, saved[k].to(v.dtype)), k
     second.run()
-    log = (tmp_path / "b" / "run" / "train_log.csv").read_text().splitlines()
-    baseline = [r for r in log[1:] if r.startswith("0,val,")]
-    assert len(baseline) == 2  # fusion and spike-only scored before the first step
+    import csv
+
+    rows = list(csv.DictReader(open(tmp_path / "b" / "run" / "train_log.csv")))
+    baseline = {r["variant"]: float(r["val_psnr"]) for r in rows if r["step"] == "0" and r["kind"] == "val"}
+    assert set(baseline) == {"fusion", "spike"}  # fusion and spike-only scored before the first step
     assert set(second.best) == {"fusion", "spike"}
-    assert all(second.best[v] >= float(r.split(",")[9]) for v, r in zip(("fusion", "spike"), baseline))
+    assert all(second.best[v]["val_psnr"] >= baseline[v] for v in baseline)

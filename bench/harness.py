@@ -1,0 +1,635 @@
+"""The sweep harness: every cell of a grid with every requested method, resumable (the library behind
+``python -m bench.sweep`` and ``python -m bench.noise``; the commands live in :mod:`bench.sweep`).
+
+A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method, and writes
+into its output folder:
+
+``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs,
+                    the device and each learned method's precision) and how it was executed
+``metadata.json``   provenance (:mod:`bench.provenance`): commit, versions, machine, executor,
+                    threads per worker, start and end of each run
+``parts/<cell>.csv`` one cell's rows, written atomically when the cell finishes
+``results.csv``     every row (:mod:`bench.results`), assembled from the parts, sorted
+``errors/<cell>.txt`` tracebacks of the failures of a cell, when any
+``images/``         reconstructions and ground truth for the report's figure grid, in the layout
+                    of :mod:`bench.report` (``images/<scene>/<axis>=<value>/<method>.png``): for the
+                    swept axis, of the first seed with the other axes at their first value
+``cache/``          simulated recordings (:mod:`neuspike.simulation.cache`), unless ``--cache`` points elsewhere:
+                    one file per modality, so a method added to a finished sweep simulates nothing
+                    again, except the events when it is the sweep's first recurrent method that reads
+                    them (its warm-up history changes the event camera's state; the summary says so)
+
+Resuming
+    Finished cells are never recomputed: a rerun of the same command after a crash, an interrupt or
+    a kill runs only the cells without a part file, then assembles ``results.csv``, which equals an
+    uninterrupted run's in every column except the timing columns
+    (:data:`bench.results.TIMING_COLUMNS`), which measure each run anew. A rerun with a different
+    configuration in the same folder is refused, another ``--device`` or a precision resolved
+    differently included (``--force`` replaces the old results; cached
+    recordings stay valid since their keys hold everything that determines them). Cells whose
+    methods failed are kept as results; ``--retry-failed`` runs them again.
+
+Exit status
+    0 when every cell ran without failure; 1 when a method or a simulation failed (error rows)
+    unless ``--allow-failures``, and always when cells are missing (a worker died); 2 for invalid
+    options or a changed configuration; 130 when interrupted. Methods that cannot run here (e.g.
+    learned weights not given) are skipped with the reason in their rows; a skip is not a failure.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from bench import grid as grids
+from bench.cells import CellTask, WorkerSetup, instances, one_line, plugin_names, prepare_worker, run_cell
+from bench.executors import DaskExecutor, make_executor
+from bench.grid import Grid
+from bench.provenance import collect, finish, now_iso
+from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
+from neuspike.atomic import write_json, write_text
+from neuspike.errors import InputError, NeuSpikeError
+from neuspike.jsonio import canonical_json, stable_hash
+from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
+
+#: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
+HARNESS_VERSION = "2"  # 2: the static_texture metric
+#: Default event history for recurrent methods, in windows of the spike window's duration.
+
+
+class ConfigMismatch(InputError):
+    """The output folder holds results of a different configuration."""
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What a sweep measures (everything that determines its results).
+
+    Parameters
+    ----------
+    name : str
+        ``"light"``, ``"motion"``, ``"noise"`` or any label.
+    grid : Grid
+    methods : tuple of str
+        Registry names, in the order rows are produced.
+    sensor : SensorConfig
+        Planes per window, plane rate, thresholds.
+    history_windows : float
+        Event history before the window, in window durations, simulated only when a requested
+        method is recurrent (it warms up on it).
+    weights : str or None
+        Folder of published weights (the command line's ``--weights`` or ``$NEUSPIKE_WEIGHTS``).
+    axis : str or None
+        The swept axis (``"light"``, ``"motion"``, ``"noise"``) whose reconstructions are saved
+        as images for the report's figure grid; ``None`` saves none.
+    """
+
+    name: str
+    grid: Grid
+    methods: tuple[str, ...]
+    sensor: Any = None
+    history_windows: float = DEFAULT_HISTORY_WINDOWS
+    weights: str | None = None
+    axis: str | None = None
+
+    def __post_init__(self) -> None:
+        from neuspike.simulation.recording import SensorConfig
+
+        if self.sensor is None:
+            object.__setattr__(self, "sensor", SensorConfig())
+        methods = tuple(self.methods)
+        if not methods:
+            raise InputError("a sweep needs at least one method")
+        if len(set(methods)) != len(methods):
+            raise InputError(f"methods repeat a name: {list(methods)}")
+        object.__setattr__(self, "methods", methods)
+        hw = float(self.history_windows)
+        if not hw >= 0 or hw != hw or hw == float("inf"):
+            raise InputError(f"history_windows: expected a finite number >= 0, got {self.history_windows!r}")
+        object.__setattr__(self, "history_windows", hw)
+        if self.weights is not None:
+            object.__setattr__(self, "weights", str(Path(self.weights).resolve()))
+        if self.axis is not None and self.axis not in grids.AXES:
+            raise InputError(f"axis: expected one of {', '.join(grids.AXES)} or None, got {self.axis!r}")
+        self.grid.check_planes(self.sensor.planes)
+
+    def keeps_images(self, cell: grids.Cell) -> bool:
+        """Whether ``cell``'s reconstructions go to ``images/``: the first seed, and every axis
+        other than :attr:`axis` at its first value (so each image path names one cell)."""
+        if self.axis is None or cell.seed != self.grid.seeds[0]:
+            return False
+        firsts = {"light": self.grid.lights[0], "motion": self.grid.motions[0], "noise": self.grid.noises[0]}
+        c = cell.condition
+        return all(getattr(c, ax) == v for ax, v in firsts.items() if ax != self.axis)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "grid": self.grid.as_dict(),
+            "methods": list(self.methods),
+            "sensor": self.sensor.as_dict(),
+            "history_windows": self.history_windows,
+            "weights": self.weights,
+            "axis": self.axis,
+        }
+
+
+@dataclass(frozen=True)
+class Execution:
+    """How a sweep runs (nothing here changes its results, only the timing columns, except ``device``).
+
+    Parameters
+    ----------
+    executor : str or executor object
+        ``"local"`` or ``"dask"``, or an instance of :class:`~bench.executors.LocalExecutor` /
+        :class:`~bench.executors.DaskExecutor`.
+    workers : int
+        Worker processes (local) or LocalCluster workers (dask).
+    scheduler : str or None
+        Address of an existing Dask scheduler.
+    threads : int or None
+        torch threads per worker; ``None``: the usable CPUs divided by the workers (at least 1),
+        or 1 on a remote Dask cluster.
+    cache_dir : path or None
+        Where simulated recordings are cached; ``None`` means ``<out>/cache``.
+    use_cache : bool
+        ``False`` simulates every cell afresh and stores nothing.
+    plugins : tuple of str
+        Plug-in modules each worker imports (see :func:`bench.cells.load_plugins`).
+    device : str
+        Torch device of learned methods (default ``"cpu"``). It and the precision each learned
+        method resolves on it change the results, so both are part of the sweep's identity
+        (:func:`arithmetic`); a device no selected method runs on is refused.
+    allow_failures, force, retry_failed, progress, report :
+        See the command line's help. ``progress=None`` shows the bar only on a terminal.
+    """
+
+    executor: Any = "local"
+    workers: int = 1
+    scheduler: str | None = None
+    threads: int | None = None
+    cache_dir: str | os.PathLike | None = None
+    use_cache: bool = True
+    plugins: tuple[str, ...] = ()
+    allow_failures: bool = False
+    force: bool = False
+    retry_failed: bool = False
+    progress: bool | None = None
+    report: bool = True
+    device: str = "cpu"
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep did. ``exit_code`` is the command's exit status (module docstring)."""
+
+    out_dir: Path
+    results_path: Path
+    n_cells: int
+    n_ok: int
+    n_failed: int
+    n_missing: int
+    n_computed: int
+    n_cache_hits: int
+    skipped: dict[str, str]
+    allow_failures: bool
+    seconds: float
+    time_split: dict[str, Any] = field(default_factory=dict)
+    report_path: Path | None = None
+    report_note: str | None = None
+    report_failed: bool = False
+    #: Cells of this run that simulated each modality (the rest came from the recording cache).
+    simulated: dict[str, int] = field(default_factory=dict)
+    #: The event history simulated before each window, seconds (part of a cached event recording's key).
+    history_s: float = 0.0
+    use_cache: bool = True
+
+    @property
+    def exit_code(self) -> int:
+        if self.n_missing or self.report_failed:
+            return 1
+        if self.n_failed and not self.allow_failures:
+            return 1
+        return 0
+
+    def summary(self) -> str:
+        lines = [f"{self.n_ok} cells ok, {self.n_failed} failed"
+                 + (f", {self.n_missing} missing (rerun to complete them)" if self.n_missing else "")
+                 + f" ({self.n_computed} computed now, {self.n_cache_hits} from the recording cache; "
+                 f"{self.seconds:.1f} s)"]
+        if self.use_cache and any(self.simulated.values()):
+            lines.append(self._cache_note())
+        for name, reason in sorted(self.skipped.items()):
+            lines.append(f"skipped {name}: {reason}")
+        if self.time_split:
+            sim = self.time_split["simulation_s_per_cell"]
+            per = ", ".join(f"{m} {v:.1f}" for m, v in self.time_split["method_ms_per_frame"].items())
+            lines.append(f"time: simulation {sim:.3f} s per cell; methods, median ms per frame: {per}")
+        if self.n_failed and self.allow_failures:
+            lines.append("failures allowed (--allow-failures): see the error column and errors/")
+        return "\n".join(lines)
+
+
+    def _cache_note(self) -> str:
+        """What was simulated and when the recording cache serves it (one line)."""
+        done = ", ".join(f"{m} for {n}" for m, n in sorted(self.simulated.items()) if n)
+        history = (f"{self.history_s:g} s here, as a recurrent method reads events" if self.history_s
+                   else "none here, as no recurrent method reads events")
+        return (f"simulated now: {done} of {self.n_computed} recordings (cached spikes serve every later sweep "
+                f"of the same cells; cached events only one with the same event history: {history})")
+
+
+# ----------------------------------------------------------------------------------------------
+# Resolving a sweep
+# ----------------------------------------------------------------------------------------------
+
+def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
+    """Which methods can run here, what they consume, and the event history they need.
+
+    The methods are built here by :func:`bench.cells.instances`, the same per-process instances the
+    cells of this process use (so each is built once per worker): unknown names and a device that
+    cannot be used raise :class:`InputError` before anything runs; a creation that fails raises;
+    :class:`~neuspike.methods.MethodUnavailable` marks a method as skipped. The modalities simulated
+    are the union of the inputs of the available methods; the event history is ``history_windows``
+    window durations when one of them is recurrent, else 0.
+    """
+    prepare_worker(setup)
+    setup = replace(setup, weights=spec.weights)  # the spec's folder decides what is available
+    inputs: dict[str, list[str]] = {}
+    unavailable: dict[str, str] = {}
+    recurrent: list[str] = []
+    for name, (entry, created, _) in instances(spec.methods, setup).items():
+        if created.unavailable is not None:
+            unavailable[name] = one_line(created.unavailable)
+            continue
+        if created.error is not None:
+            raise created.error
+        inputs[name] = sorted(entry.inputs)
+        if created.method.recurrent:
+            recurrent.append(name)
+    modalities = sorted({m for ins in inputs.values() for m in ins})
+    window_s = spec.sensor.planes / spec.sensor.plane_rate_hz
+    history_s = spec.history_windows * window_s if recurrent and "events" in modalities else 0.0
+    return {"inputs": inputs, "unavailable": unavailable, "recurrent": recurrent,
+            "modalities": modalities, "history_s": history_s}
+
+
+#: The device of every sweep folder written before the sweep's identity held its arithmetic.
+LEGACY_DEVICE = "cpu"
+
+
+def arithmetic(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
+    """The device and the precisions the methods compute with: part of the sweep's identity.
+
+    ``{"device": str, "precision": {method: "float32" | "bfloat16"}}``, the precision of each
+    available method that has one (the learned ones, as resolved on this machine for this device).
+    Both change the results, so a resumed sweep must use the same (:func:`_check_config`).
+    """
+    precision = {}
+    for name, (_, created, _) in instances(spec.methods, replace(setup, weights=spec.weights)).items():
+        if created.method is not None and "precision" in created.method.params:
+            precision[name] = str(created.method.params["precision"])
+    return {"device": setup.device.strip().lower(), "precision": precision}
+
+
+def _legacy_arithmetic(out: Path, new: dict[str, Any]) -> dict[str, Any]:
+    """The arithmetic of a folder whose ``config.json`` predates it: the CPU, and each learned
+    method's precision as the folder's rows record it (``method_params``); a method no row
+    records (no finished cell, nothing to mix) keeps the precision ``new`` gives it."""
+    recorded: dict[str, str] = {}
+    for path in sorted((out / "parts").glob("*.csv"))[:1] or [out / "results.csv"]:
+        try:
+            frame = read_csv(path)
+        except (OSError, ValueError):
+            continue
+        for name, text in frame.drop_duplicates("method")[["method", "method_params"]].itertuples(index=False):
+            try:
+                params = json.loads(text).get("params", {}) if isinstance(text, str) and text else {}
+            except (ValueError, AttributeError):
+                params = {}
+            if "precision" in params:
+                recorded[str(name)] = str(params["precision"])
+    return {"device": LEGACY_DEVICE,
+            "precision": {m: recorded.get(m, p) for m, p in new["precision"].items()}}
+
+
+def cell_id(spec: SweepSpec, resolved: dict[str, Any], cell: grids.Cell,
+            arith: dict[str, Any] | None = None) -> str:
+    """The id of a cell's part file: a hash of the cell and of what the sweep does with it.
+
+    ``arith`` (:func:`arithmetic`) enters the hash unless it is the CPU in float32, what every
+    sweep before it ran with, so that the parts of those folders keep their ids.
+    """
+    ident = {
+        "harness": HARNESS_VERSION, "cell": cell.identity(), "sensor": spec.sensor.as_dict(),
+        "methods": list(spec.methods), "modalities": resolved["modalities"],
+        "history_s": resolved["history_s"], "weights": spec.weights,
+    }
+    if arith is not None and (arith["device"] != LEGACY_DEVICE
+                              or any(p != "float32" for p in arith["precision"].values())):
+        ident["arithmetic"] = arith
+    return stable_hash(ident)
+
+
+def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for key in sorted(set(old) | set(new)):
+            out += _diff_paths(old.get(key), new.get(key), f"{path}.{key}" if path else str(key))
+        return out
+    if old == new:
+        return []
+    if path.split(".")[0] in ("device", "precision"):  # short values: say what they were and are
+        return [f"{path} {old if old is not None else 'absent'} -> {new if new is not None else 'absent'}"]
+    return [path or "(everything)"]
+
+
+def _check_config(out: Path, sweep_config: dict[str, Any], force: bool) -> bool:
+    """Compare with an existing ``config.json``; return whether the old results are stale."""
+    path = out / "config.json"
+    if not path.exists():
+        return False
+    try:
+        old = json.loads(path.read_text()).get("sweep")
+    except (OSError, ValueError) as exc:
+        old = {"unreadable": str(exc)}
+    new = json.loads(canonical_json(sweep_config))
+    if isinstance(old, dict) and "device" not in old and "precision" not in old and "device" in new:
+        old = {**old, **_legacy_arithmetic(out, new)}  # written before the identity held them
+    if old == new:
+        return False
+    if not force:
+        changed = ", ".join(_diff_paths(old, new)[:8])
+        raise ConfigMismatch(
+            f"{out} holds results of a different sweep (changed: {changed}). Use a new --out folder, "
+            "or --force to replace those results (cached recordings are kept and reused)."
+        )
+    return True
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _time_split(frame: pd.DataFrame) -> dict[str, Any]:
+    """Where the time went: simulation per cell and each method's median ms per frame."""
+    if frame.empty:
+        return {}
+    one = frame[frame["metric"] == frame["metric"].iloc[0]]
+    sim = one.drop_duplicates("cell")["sim_seconds"].dropna()
+    per_method = (one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].median().dropna())
+    return {
+        "simulation_s_per_cell": float(sim.mean()) if len(sim) else float("nan"),
+        "simulation_s_total": float(sim.sum()),
+        "method_ms_per_frame": {m: float(v) for m, v in per_method.items()},
+        "method_s_total": {m: float(v) / 1e3 for m, v in
+                           one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].sum().items()},
+    }
+
+
+def preflight(spec: SweepSpec) -> None:
+    """Refuse, before the first cell, a sweep whose cells cannot give results.
+
+    Checks every scene's size against the SSIM window and that its source image loads (a missing
+    photograph would otherwise fail every cell and report ``nan`` seconds per cell).
+
+    Raises
+    ------
+    InputError
+        One message naming the scene and the problem.
+    """
+    from neuspike.metrics import SSIM_WINDOW_SIDE
+    from neuspike.scenes import make_scene
+
+    for entry in spec.grid.scenes:
+        size = entry.spec.size
+        if size is not None and min(size) < SSIM_WINDOW_SIDE:
+            raise InputError(
+                f"size {size[0]}x{size[1]}: both sides must be at least {SSIM_WINDOW_SIDE} pixels, the side of "
+                f"the pinned SSIM window (scene {entry.name})"
+            )
+        try:
+            make_scene(entry.spec)
+        except NeuSpikeError as exc:
+            raise InputError(f"scene {entry.name}: {exc}") from None
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """Hidden ``.*.tmp`` files a killed run left in its own outputs (never in a shared cache)."""
+    from neuspike.formats.staging import remove_stale_temporaries
+
+    remove_stale_temporaries(out)
+    for folder in ("parts", "errors", "images"):
+        if (out / folder).is_dir():
+            for sub in [out / folder, *(p for p in (out / folder).rglob("*") if p.is_dir())]:
+                remove_stale_temporaries(sub)
+
+
+def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[str, Any]) -> None:
+    """Write a cell's images in :mod:`bench.report`'s layout (nothing when that module is absent)."""
+    if importlib.util.find_spec("bench.report") is None:
+        return
+    from bench.report import image_path, write_image_png
+
+    value = getattr(cell.condition, axis)
+    for name, image in images.items():
+        write_image_png(image_path(images_dir, cell.scene.name, axis, value, name), image)
+
+
+def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]:
+    """Call ``bench.report.build_report(out)`` when that module exists.
+
+    Returns ``(pdf_path, note, failed)``: a note instead of a path when the module is not installed
+    or the report failed.
+    """
+    if importlib.util.find_spec("bench.report") is None:
+        return None, "report: bench.report is not available here; results.csv holds every number", False
+    try:
+        from bench.report import build_report
+
+        return Path(build_report(out)), None, False
+    except Exception as exc:
+        return None, f"report failed: {one_line(exc)}", True
+
+
+# ----------------------------------------------------------------------------------------------
+# Running a sweep
+# ----------------------------------------------------------------------------------------------
+
+def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution = Execution()) -> SweepOutcome:
+    """Run (or resume) a sweep into ``out_dir`` and assemble its ``results.csv``.
+
+    Raises
+    ------
+    InputError
+        Unknown methods or invalid options (before anything runs).
+    ConfigMismatch
+        ``out_dir`` holds results of a different sweep and ``execution.force`` is false.
+    """
+    from neuspike.formats.staging import check_writable_folder
+
+    t_start = time.perf_counter()
+    out = check_writable_folder(out_dir, what="output folder")
+    parts_dir, errors_dir = out / "parts", out / "errors"
+    preflight(spec)
+
+    executor = execution.executor
+    if isinstance(executor, str):
+        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
+    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
+    threads = execution.threads
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise InputError(f"threads: expected a whole number >= 1, got {threads!r}")
+    if threads is None:
+        usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        threads = 1 if remote else max(1, usable // max(1, executor.workers))
+    plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
+    setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
+
+    resolved = resolve_methods(spec, setup)
+    arith = arithmetic(spec, setup)
+    sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved, **arith}
+    stale = _check_config(out, sweep_config, execution.force)
+    cache_dir = None
+    if execution.use_cache:
+        cache_dir = str(Path(execution.cache_dir).resolve() if execution.cache_dir else (out / "cache").resolve())
+
+    cells = spec.grid.cells()
+    tasks = []
+    for cell in cells:
+        tasks.append(CellTask(
+            cell_id=cell_id(spec, resolved, cell, arith), cell=cell, sensor=spec.sensor, methods=spec.methods,
+            modalities=tuple(resolved["modalities"]), history_s=resolved["history_s"],
+            cache_dir=cache_dir, setup=setup, keep_images=spec.keeps_images(cell),
+        ))
+    ids = [t.cell_id for t in tasks]
+    if len(set(ids)) != len(ids):
+        raise InputError("two cells of the grid are identical; check the scene names and axes")
+
+    if stale:
+        for path in (out / "results.csv",):
+            path.unlink(missing_ok=True)
+        for folder in (parts_dir, errors_dir, out / "images"):
+            shutil.rmtree(folder, ignore_errors=True)
+    parts_dir.mkdir(exist_ok=True)
+    _remove_stale_temporaries(out)  # left by a run killed while writing; never a result
+    wanted = set(ids)
+    for path in parts_dir.glob("*.csv"):  # parts of an older harness version or of a forced rerun
+        if path.stem not in wanted:
+            path.unlink()
+
+    execution_config = {
+        **executor.describe(), "threads_per_worker": threads, "cache_dir": cache_dir,
+        "plugins": list(plugins), "allow_failures": execution.allow_failures,
+    }
+    write_json(out / "config.json", {"sweep": sweep_config, "execution": execution_config})
+
+    done: dict[str, str] = {}
+    for cid in ids:
+        path = part_path(parts_dir, cid)
+        if path.exists():
+            try:
+                status = ERROR if (read_csv(path)["status"] == ERROR).any() else OK
+            except (OSError, ValueError):
+                path.unlink()  # not a part this harness wrote; recompute
+                continue
+            if status == ERROR and execution.retry_failed:
+                continue
+            done[cid] = status
+    todo = [t for t in tasks if t.cell_id not in done]
+
+    previous = _read_json(out / "metadata.json") if not stale else None
+    history = []
+    if previous:
+        history = list(previous.get("previous_runs", [])) + [
+            {k: previous.get(k) for k in ("start", "end", "executor", "threads_per_worker",
+                                           "cells_computed", "source")}]
+    run = collect(executor=executor.describe(), threads_per_worker=threads, start=now_iso(),
+                  contended=None if remote else executor.workers > 1)
+    run["sweep"] = spec.name
+    run["previous_runs"] = history
+    write_json(out / "metadata.json", run)
+
+    n_failed_now = n_hits = n_computed = 0
+    n_simulated: dict[str, int] = {}
+    crashed: dict[str, str] = {}
+    observed_threads: set[int] = set()
+    skipped: dict[str, str] = dict(resolved["unavailable"])
+    from tqdm import tqdm
+
+    n_done_failed = sum(1 for s in done.values() if s == ERROR)
+    bar = tqdm(total=len(tasks), initial=len(done), unit="cell", desc=f"{spec.name} sweep",
+               disable=(None if execution.progress is None else not execution.progress),
+               file=sys.stderr, dynamic_ncols=True)
+
+    def postfix() -> None:
+        bar.set_postfix(done=len(done), failed=n_done_failed + n_failed_now + len(crashed),
+                        remaining=len(tasks) - len(done) - len(crashed), refresh=False)
+
+    postfix()
+    try:
+        with (executor if todo else contextlib.nullcontext()):
+            for task, result in (executor.run(run_cell, todo) if todo else ()):
+                if isinstance(result, BaseException):
+                    crashed[task.cell_id] = one_line(result)
+                else:
+                    if result.images:  # before the part: a finished cell always has its images
+                        _write_images(out / "images", spec.axis, task.cell, result.images)
+                    write_part(parts_dir, task.cell_id, result.rows)
+                    if result.failures:
+                        text = "\n".join(f"== {k} ==\n{v}" for k, v in result.failures.items())
+                        write_text(errors_dir / f"{task.cell_id}.txt", text)
+                    else:  # a retried cell that now succeeds
+                        (errors_dir / f"{task.cell_id}.txt").unlink(missing_ok=True)
+                    done[task.cell_id] = result.status
+                    n_computed += 1
+                    n_hits += int(result.cache_hit)
+                    for modality in result.simulated:
+                        n_simulated[modality] = n_simulated.get(modality, 0) + 1
+                    n_failed_now += int(result.status == ERROR)
+                    skipped.update(result.skipped)
+                    if result.threads is not None:
+                        observed_threads.add(result.threads)
+                postfix()
+                bar.update(1)
+    finally:
+        bar.close()
+
+    results_path = out / "results.csv"
+    frame = assemble(parts_dir, ids, results_path)
+    n_failed = sum(1 for s in done.values() if s == ERROR)
+    n_missing = len(tasks) - len(done)
+    split = _time_split(frame)
+    outcome = SweepOutcome(
+        out_dir=out, results_path=results_path, n_cells=len(tasks), n_ok=len(done) - n_failed,
+        n_failed=n_failed, n_missing=n_missing, n_computed=n_computed, n_cache_hits=n_hits,
+        skipped=skipped, allow_failures=execution.allow_failures,
+        seconds=time.perf_counter() - t_start, time_split=split,
+        simulated=n_simulated, history_s=resolved["history_s"], use_cache=cache_dir is not None,
+    )
+    run = finish(run, cells_total=len(tasks), cells_computed=n_computed, cells_failed=n_failed,
+                 cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,
+                 threads_observed=sorted(observed_threads), time_split=split,
+                 wall_seconds=outcome.seconds)
+    write_json(out / "metadata.json", run)
+    if execution.report and not frame.empty:
+        outcome.report_path, outcome.report_note, outcome.report_failed = build_report_if_available(out)
+    return outcome
+
+
+# ----------------------------------------------------------------------------------------------
+# Command line (shared with bench.noise)
+# ----------------------------------------------------------------------------------------------

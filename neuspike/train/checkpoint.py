@@ -1,0 +1,232 @@
+"""A run folder's files: the frozen spec, the checkpoint, the log, the exported weights and their card.
+
+Everything is written atomically (:mod:`neuspike.atomic`); a killed run leaves either the old file
+or the new one, and the temporaries a kill leaves behind are removed when the run starts again
+(:func:`remove_temporaries`).
+
+* ``spec.json``: :meth:`TrainSpec.as_dict`; a folder holding another run's spec is refused. Spec
+  files of the earlier trainers read through :func:`neuspike.train.spec.spec_from_dict`.
+* ``checkpoint.pt``: ``{"format": 2, "step", "module", "optimizer", "best", "wall_s", "torch_rng"}``.
+  The earlier trainers' checkpoints (``model``/``optim`` with a best PSNR per variant, or
+  ``module``/``optimizer`` with one best record) read through :func:`upgrade_checkpoint`.
+* ``train_log.csv``: one row per step (``kind`` ``train``) and per validation (``kind`` ``val``),
+  columns :data:`LOG_COLUMNS`. On resume the rows after the checkpoint's step are dropped
+  (:func:`trim_log`), so the log never repeats a step; an earlier trainer's log is rewritten in these
+  columns.
+* weights: ``<name>.safetensors`` and its card ``<name>.json`` (:func:`export_weights`): float32 for
+  networks under a million parameters, bfloat16 above (the card records which).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+from neuspike import atomic
+from neuspike.errors import FormatError, InputError
+from neuspike.train.spec import TrainSpec, load_spec
+
+__all__ = [
+    "CHECKPOINT", "CHECKPOINT_FORMAT", "LOG", "LOG_COLUMNS", "SPEC", "append_log", "check_spec",
+    "export_weights", "load_checkpoint", "make_card", "remove_temporaries", "save_checkpoint", "trim_log",
+    "upgrade_checkpoint",
+]
+
+SPEC, CHECKPOINT, LOG = "spec.json", "checkpoint.pt", "train_log.csv"
+CHECKPOINT_FORMAT = 2
+LOG_COLUMNS = ("step", "kind", "variant", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds", "samples_per_s",
+               "wall_s", "val_l1", "val_psnr", "val_ssim", "val_ssim_last")
+#: Validation scores of the log (a row of the sequence trainer held them beside the step's loss).
+_VAL_COLUMNS = ("val_l1", "val_psnr", "val_ssim", "val_ssim_last")
+
+
+def remove_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporaries (``.<name>.*.tmp``) an atomic write killed midway left in ``folder``; return them."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    stale = [p for p in folder.glob(".*.tmp") if p.is_file()]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
+
+
+def check_spec(spec: TrainSpec) -> None:
+    """Write ``spec.json`` into the run folder, or check that the one there is the same run.
+
+    Raises
+    ------
+    InputError
+        When the folder holds a run of another spec (fields that change no result, such as the run
+        folder, threads and export targets, may differ).
+    """
+    out = Path(spec.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / SPEC
+    if path.exists():
+        have = load_spec(path, out_dir=spec.out_dir)
+        if have.identity() != spec.identity():
+            mine, theirs = spec.identity(), have.identity()
+            diff = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+            raise InputError(f"{path}: this folder holds a run of another spec (differs in {', '.join(diff)}); "
+                             f"resume with the same spec or use another --out")
+    else:
+        atomic.write_text(path, json.dumps(spec.as_dict(), indent=2, sort_keys=True) + "\n")
+
+
+# --- checkpoints ----------------------------------------------------------------------------------
+
+
+def upgrade_checkpoint(state: Mapping[str, Any], *, score_key: str, variants: Iterable[str]) -> dict[str, Any]:
+    """A checkpoint of any trainer in the current form (``format`` 2).
+
+    * single-window trainer: ``model``, ``optim``, ``best`` = ``{variant: best PSNR}``, ``torch_rng``;
+    * sequence trainer: ``module``, ``optimizer``, ``best`` = ``{"step", "val_ssim", ...}``, ``wall_s``.
+
+    ``best`` becomes ``{variant: {score_key: ..., ...}}`` (the sequence trainer's single network is
+    the variant of ``variants``).
+
+    Raises
+    ------
+    FormatError
+        When ``state`` is none of these.
+    """
+    if state.get("format") == CHECKPOINT_FORMAT:
+        return dict(state)
+    if "model" in state and "optim" in state:
+        best = {v: {score_key: float(psnr)} for v, psnr in dict(state.get("best", {})).items()}
+        return {"format": CHECKPOINT_FORMAT, "step": int(state["step"]), "module": state["model"],
+                "optimizer": state["optim"], "best": best, "wall_s": 0.0, "torch_rng": state.get("torch_rng")}
+    if "module" in state and "optimizer" in state:
+        old = dict(state.get("best", {}))
+        best = {}
+        if old.get(score_key, -1.0) > -1.0:  # the sequence trainer's "nothing yet" was val_ssim = -1
+            (variant,) = tuple(variants)
+            best = {variant: old}
+        return {"format": CHECKPOINT_FORMAT, "step": int(state["step"]), "module": state["module"],
+                "optimizer": state["optimizer"], "best": best, "wall_s": float(state.get("wall_s", 0.0)),
+                "torch_rng": state.get("torch_rng")}
+    raise FormatError(f"not a training checkpoint (keys {sorted(state)})")
+
+
+def save_checkpoint(out_dir: str | os.PathLike, *, step: int, module, optimizer, best: Mapping[str, Any],
+                    wall_s: float) -> Path:
+    """Write ``checkpoint.pt`` atomically (with torch's global RNG state)."""
+    import torch
+
+    buf = io.BytesIO()
+    torch.save({"format": CHECKPOINT_FORMAT, "step": int(step), "module": module.state_dict(),
+                "optimizer": optimizer.state_dict(), "best": dict(best), "wall_s": float(wall_s),
+                "torch_rng": torch.get_rng_state()}, buf)
+    return atomic.write_bytes(Path(out_dir) / CHECKPOINT, buf.getvalue())
+
+
+def load_checkpoint(out_dir: str | os.PathLike, *, score_key: str, variants: Iterable[str]) -> dict[str, Any] | None:
+    """The run folder's checkpoint in the current form (:func:`upgrade_checkpoint`), or ``None``."""
+    import torch
+
+    path = Path(out_dir) / CHECKPOINT
+    if not path.exists():
+        return None
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise FormatError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    if not isinstance(state, dict):
+        raise FormatError(f"{path}: not a training checkpoint")
+    try:
+        return upgrade_checkpoint(state, score_key=score_key, variants=variants)
+    except FormatError as exc:
+        raise FormatError(f"{path}: {exc}") from None
+
+
+# --- the log --------------------------------------------------------------------------------------
+
+
+def _rows_now(row: Mapping[str, str]) -> list[dict[str, str]]:
+    """A log row of any trainer in :data:`LOG_COLUMNS` (a sequence row with scores becomes two rows)."""
+    row = {k: v for k, v in row.items() if k is not None}
+    if "kind" in row:
+        return [{k: row.get(k, "") for k in LOG_COLUMNS}]
+    train = {k: row.get(k, "") for k in LOG_COLUMNS if k not in _VAL_COLUMNS}
+    train.update(kind="train", variant="main", seconds=row.get("seconds_per_step", ""))
+    out = [train]
+    if row.get("val_ssim", "") != "":
+        val = {k: "" for k in LOG_COLUMNS}
+        val.update({k: row.get(k, "") for k in _VAL_COLUMNS}, step=row["step"], kind="val", variant="main")
+        out.append(val)
+    return out
+
+
+def trim_log(out_dir: str | os.PathLike, step: int) -> None:
+    """Keep the log's rows up to ``step`` (those after it are redone on resume), in :data:`LOG_COLUMNS`."""
+    path = Path(out_dir) / LOG
+    if not path.exists():
+        return
+    with open(path, newline="") as f:
+        rows = [r for old in csv.DictReader(f) for r in _rows_now(old)]
+    kept = [r for r in rows if r.get("step", "") != "" and int(r["step"]) <= step]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=LOG_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    w.writerows(kept)
+    atomic.write_text(path, buf.getvalue())
+
+
+def append_log(out_dir: str | os.PathLike, row: Mapping[str, Any]) -> None:
+    """Append one row (header first in a new log)."""
+    path = Path(out_dir) / LOG
+    new = not path.exists()
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=LOG_COLUMNS, lineterminator="\n")
+        if new:
+            w.writeheader()
+        w.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
+
+
+# --- weights and card -----------------------------------------------------------------------------
+
+
+def _commit() -> str | None:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
+                              cwd=Path(__file__).resolve().parent).stdout.strip() or None
+    except Exception:
+        return None
+
+
+def make_card(spec: TrainSpec, *, name: str, model_class: str, params: Mapping[str, Any], step: int,
+              precision: str, wall_s: float, scores: Mapping[str, float], data: Mapping[str, Any]) -> dict[str, Any]:
+    """The JSON card of exported weights: what was trained, how, on what, and how well it validated."""
+    import torch
+
+    return {"method": name, "model": {"class": model_class, "params": dict(params)},
+            "training": {"spec": spec.as_dict(), "step": int(step), "precision": precision,
+                         "wall_s": round(float(wall_s), 1), "threads": torch.get_num_threads(), "commit": _commit(),
+                         "command": f"python -m neuspike.train {spec.method} --spec SPEC (the spec above)"},
+            "data": dict(data), "validation": {k: v for k, v in scores.items() if k != "step"}, "torch": torch.__version__}
+
+
+def export_weights(state: Mapping[str, Any], folders: Iterable[str | os.PathLike], name: str,
+                   card: Mapping[str, Any]) -> list[Path]:
+    """Write ``<name>.safetensors`` and its card into every folder; float32 under a million parameters,
+    bfloat16 above."""
+    import torch
+
+    from neuspike.weights import save_safetensors
+
+    count = sum(v.numel() for v in state.values() if v.is_floating_point())
+    dtype = None if count < 1_000_000 else torch.bfloat16
+    return [save_safetensors(state, Path(folder) / f"{name}.safetensors", card=card, dtype=dtype)
+            for folder in folders]
+
+
+def best_score(best: Mapping[str, Any], variant: str, score_key: str) -> float:
+    """The best ``score_key`` of ``variant`` so far (-inf before the first validation)."""
+    return float(best.get(variant, {}).get(score_key, -math.inf))

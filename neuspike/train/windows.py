@@ -1,0 +1,370 @@
+"""Single-window training data (:class:`~neuspike.train.spec.WindowData`): cells drawn from (seed,
+split, index), simulated through the core's sample builder, and the batches, loss and validation of
+a feed-forward network trained on them (:class:`WindowTask`).
+
+A cell is a scene (a training photograph panning in any direction, zooming, behind a fan, or still;
+or a procedural dead-leaves scene with independently moving layers) and a condition (L
+log-uniform over ``data.light_range``, S from ``data.motions``, a noise level from
+``data.noise_levels``, plus the sweeps' default effects: random initial charge and the clean
+event-camera preset). Everything about cell ``index`` of ``split`` comes from
+``derive_rng(seed, "train-cell", split, index)``, and the window is simulated by
+:func:`neuspike.simulation.cell.simulate_sample`, so the same seed gives the same bytes.
+
+Photographs are seen at the scales the sweeps use: a random region of the training photograph is
+cut and resized to the square view so that its scale is 0.3x to 1.2x the scale at which the
+photograph covers the 400x250 sensor; the region is written as a ``.npy`` file in the shard folder
+that the scene spec names (the test photographs are refused by the spec). The simulator's noise
+draws depend on the scene spec, which names that file, so the same bytes need the same seed *and*
+the same shard folder.
+
+Simulation costs far more than a training step on this machine, so windows are simulated once into
+a *shard* (one ``.npz`` per window: bit-packed spike planes, the window's events, the ground truth)
+and reused across epochs with random crops, flips and quarter turns
+(:func:`augment`), all drawn from ``derive_rng(seed, "augment", step)``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import cv2
+import numpy as np
+import torch
+
+from neuspike import atomic
+from neuspike.atomic import write_bytes
+from neuspike.conditions import EVENT_PRESETS, Condition, effect
+from neuspike.errors import FormatError, InputError
+from neuspike.rng import derive_rng
+from neuspike.sample import Sample
+from neuspike.scenes import SceneSpec
+from neuspike.scenes.photos import read_photo
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
+from neuspike.streams import EventStream, SpikeStream
+from neuspike.train.spec import KIND_WEIGHTS, TrainSpec, WindowData, spec_from_dict
+
+__all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
+           "shard_paths", "simulate_cell"]
+
+#: Effects every training cell declares (the sweeps' defaults).
+BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
+SENSOR_SIZE = (400, 250)
+
+
+def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int) -> str:
+    data: WindowData = spec.data
+    name = data.photos[int(rng.integers(len(data.photos)))]
+    luma = read_photo(name)
+    h, w = luma.shape
+    scale = max(SENSOR_SIZE[0] / w, SENSOR_SIZE[1] / h) * float(np.exp(rng.uniform(np.log(0.3), np.log(1.2))))
+    side = min(int(round(data.view / scale)), h, w)
+    y0, x0 = int(rng.integers(0, h - side + 1)), int(rng.integers(0, w - side + 1))
+    region = luma[y0:y0 + side, x0:x0 + side]
+    interp = cv2.INTER_AREA if side > data.view else cv2.INTER_LINEAR
+    region = np.clip(cv2.resize(region, (data.view, data.view), interpolation=interp), 0.0, 1.0).astype(np.float32)
+    path = source_dir / f"{split}-{index:06d}-{name}.npy"
+    if not path.exists():
+        buf = io.BytesIO()
+        np.save(buf, region)
+        write_bytes(path, buf.getvalue())
+    return str(path)
+
+
+def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.PathLike
+              ) -> tuple[SceneSpec, Condition, int, dict[str, Any]]:
+    """The (scene, condition, simulation seed) of cell ``index`` of ``split``, and a description."""
+    data: WindowData = spec.data
+    rng = derive_rng(spec.seed, "train-cell", split, int(index))
+    kinds = list(KIND_WEIGHTS)
+    kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
+    size = (data.view, data.view)
+    angle = rng.uniform(0, 2 * np.pi)
+    speed = float(np.exp(rng.uniform(np.log(100.0), np.log(4000.0)))) * data.view / SENSOR_SIZE[0]
+    velocity = (speed * np.cos(angle), speed * np.sin(angle))
+    if kind == "dead_leaves":
+        scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
+    else:
+        image = _photo_source(spec, rng, Path(source_dir), split, index)
+        focus = (float(rng.uniform(0.2, 0.8) * data.view), float(rng.uniform(0.2, 0.8) * data.view))
+        if kind == "pan":
+            scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
+        elif kind == "zoom":
+            rate = float(rng.uniform(1.0, 20.0) * rng.choice([-1.0, 1.0]))
+            scene = SceneSpec(kind="zoom", image=image, size=size, zoom_rate_hz=rate, focus=focus)
+        elif kind == "fan":
+            blades = int(rng.integers(2, 6))
+            scene = SceneSpec(kind="fan", image=image, size=size, focus=focus, blades=blades,
+                              rpm=float(rng.uniform(300, 3000) * rng.choice([-1.0, 1.0])),
+                              blade_width_deg=float(rng.uniform(10, 300 / blades / 2)),
+                              blade_contrast=float(rng.uniform(0.0, 2.0)))
+        else:
+            scene = SceneSpec(kind="still", image=image, size=size)
+    lo, hi = data.light_range
+    light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    motion = int(data.motions[int(rng.integers(len(data.motions)))])
+    noise = data.noise_levels[int(rng.integers(len(data.noise_levels)))]
+    condition = Condition(light=light, motion=motion, noise=noise, effects=BASE_EFFECTS)
+    sim_seed = int(rng.integers(2**31))
+    info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
+            "image": Path(scene.image).name if kind != "dead_leaves" else None}
+    return scene, condition, sim_seed, info
+
+
+def simulate_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.PathLike) -> Sample:
+    """The simulated window of a cell (:func:`neuspike.simulation.cell.simulate_sample`), ``meta['cell']`` set."""
+    scene, condition, sim_seed, info = draw_cell(spec, split, index, source_dir)
+    sample = simulate_sample(scene, condition, sensor=SensorConfig(), seed=sim_seed,
+                             modalities=("spikes", "events"))
+    sample.meta["cell"] = info
+    return sample
+
+
+def save_sample(path: str | os.PathLike, sample: Sample) -> None:
+    """Write a simulated window compactly (bit-packed planes, window events only), atomically."""
+    sp, ev = sample.spikes, sample.window_events()
+    buf = io.BytesIO()
+    np.savez(buf, planes=np.packbits(sp.planes, axis=None), shape=np.array(sp.planes.shape),
+             plane_rate_hz=sp.plane_rate_hz, start_s=sp.start_s, gain=sp.gain, threshold=sp.threshold,
+             t=ev.t_s, x=ev.x.astype(np.uint16), y=ev.y.astype(np.uint16), p=ev.p.astype(np.int8),
+             window=np.array([sample.window_start_s, sample.key_time_s, sample.window_end_s]),
+             event_threshold=np.nan if sample.event_threshold is None else sample.event_threshold,
+             ground_truth=sample.ground_truth, cell=json.dumps(sample.meta.get("cell", {})))
+    write_bytes(path, buf.getvalue())
+
+
+def load_sample(path: str | os.PathLike) -> Sample:
+    """The :class:`Sample` written by :func:`save_sample`."""
+    try:
+        with np.load(path) as z:
+            shape = tuple(int(v) for v in z["shape"])
+            planes = np.unpackbits(z["planes"], count=int(np.prod(shape))).reshape(shape).view(bool)
+            spikes = SpikeStream(planes=planes, plane_rate_hz=float(z["plane_rate_hz"]), start_s=float(z["start_s"]),
+                                 gain=float(z["gain"]), threshold=float(z["threshold"]))
+            events = EventStream(t_s=z["t"], x=z["x"].astype(np.int64), y=z["y"].astype(np.int64),
+                                 p=z["p"].astype(np.int8), width=shape[2], height=shape[1])
+            w0, key, w1 = (float(v) for v in z["window"])
+            theta = float(z["event_threshold"])
+            return Sample(height=shape[1], width=shape[2], key_time_s=key, window_start_s=w0, window_end_s=w1,
+                          spikes=spikes, events=events, event_threshold=None if np.isnan(theta) else theta,
+                          ground_truth=z["ground_truth"].astype(np.float32), meta={"cell": json.loads(str(z["cell"]))})
+    except (OSError, KeyError, ValueError) as exc:
+        raise FormatError(f"{path}: not a training window ({exc})") from exc
+
+
+def shard_paths(shard_dir: str | os.PathLike, split: str, count: int) -> list[Path]:
+    return [Path(shard_dir) / split / f"{i:06d}.npz" for i in range(count)]
+
+
+def _make_one(args: tuple[dict[str, Any], str, int, str, str]) -> str:
+    spec_dict, split, index, source_dir, path = args
+    torch.set_num_threads(1)
+    spec = spec_from_dict(spec_dict)
+    save_sample(path, simulate_cell(spec, split, index, source_dir))
+    return path
+
+
+def build_shard(spec: TrainSpec, shard_dir: str | os.PathLike, split: str, count: int, *,
+                progress: Callable[[int], None] | None = None) -> list[Path]:
+    """Simulate the windows of ``split`` not yet on disk (resumable); return every window's path."""
+    shard_dir = Path(shard_dir)
+    (shard_dir / split).mkdir(parents=True, exist_ok=True)
+    (shard_dir / "sources").mkdir(parents=True, exist_ok=True)
+    paths = shard_paths(shard_dir, split, count)
+    todo = [(spec.as_dict(), split, i, str(shard_dir / "sources"), str(p)) for i, p in enumerate(paths) if not p.exists()]
+    if progress:
+        progress(count - len(todo))
+    if todo:
+        if spec.data.workers == 1:
+            for job in todo:
+                _make_one(job)
+                if progress:
+                    progress(1)
+        else:
+            with ProcessPoolExecutor(spec.data.workers) as pool:
+                for _ in pool.map(_make_one, todo, chunksize=4):
+                    if progress:
+                        progress(1)
+    return paths
+
+
+def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int, *, flip: bool = True
+            ) -> list[torch.Tensor]:
+    """The same random crop (``crop`` x ``crop``), flips and quarter turn of every (C, H, W) tensor."""
+    h, w = tensors[0].shape[-2:]
+    y0, x0 = int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
+    out = [t[..., y0:y0 + crop, x0:x0 + crop] for t in tensors]
+    if flip:
+        if rng.random() < 0.5:
+            out = [t.flip(-1) for t in out]
+        if rng.random() < 0.5:
+            out = [t.flip(-2) for t in out]
+        k = int(rng.integers(4))
+        if k:
+            out = [torch.rot90(t, k, dims=(-2, -1)) for t in out]
+    return [t.contiguous() for t in out]
+
+
+#: Module tensors only the fusion network has (left out of the spike-only export).
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.")
+
+
+def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    mse = ((pred - target) ** 2).mean(dim=(1, 2, 3)).clamp_min(1e-10)
+    return 10.0 * torch.log10(1.0 / mse)
+
+
+class WindowTask:
+    """Batches, loss and validation of a feed-forward network on single windows.
+
+    * **order**: step ``k`` uses the windows ``perm_e[j]`` of epoch ``e`` (a permutation drawn from
+      ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``.
+    * **inputs**: the method's own :meth:`~neuspike.learned.LearnedMethod.encode` (one step), the
+      target the sample's ground truth (1, 1, H, W).
+    * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
+    * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
+      ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
+      the motion path silenced, so the same weights also train the spike-only variant, validated and
+      exported as ``<name>-spike``.
+    * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
+      the best PSNR exports.
+    """
+
+    score_key = "val_psnr"
+
+    def __init__(self, spec: TrainSpec, method) -> None:
+        import kornia
+
+        self.spec = spec
+        self.data: WindowData = spec.data
+        self.method = method
+        self.module = method.module
+        self.fusion = method.params.get("spike_only") is False
+        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0)
+
+    # -- data --------------------------------------------------------------------------------------
+
+    def shard_folders(self) -> list[Path]:
+        root = Path(self.data.shard_dir)
+        return [root, root / "train", root / "val", root / "sources"]
+
+    def prepare(self, bar_factory: Callable[..., Any]) -> None:
+        spec, data = self.spec, self.data
+        shard = Path(data.shard_dir)
+        shard.mkdir(parents=True, exist_ok=True)
+        key_path = shard / "data_key.json"
+        key = data.key(spec.seed)
+        if key_path.exists():
+            have = json.loads(key_path.read_text())
+            if have != key:
+                raise InputError(f"{shard}: holds windows of another data spec {have}; use another shard folder")
+        else:
+            atomic.write_json(key_path, key)
+        bar = bar_factory(total=data.val_items + data.train_items, desc="simulating windows", unit="win")
+        self.val_paths = build_shard(spec, shard, "val", data.val_items, progress=bar.update)
+        self.train_paths = build_shard(spec, shard, "train", data.train_items, progress=bar.update)
+        bar.close()
+
+    def load_validation(self) -> None:
+        samples = [load_sample(p) for p in self.val_paths]
+        inputs = [self.encode(s) for s in samples]
+        stacked = [torch.cat([x[k] for x in inputs]) for k in range(len(inputs[0]))]
+        target = torch.stack([torch.from_numpy(s.ground_truth)[None] for s in samples])
+        self.val_batch = (stacked, target)
+
+    def encode(self, sample: Sample) -> tuple[torch.Tensor, ...]:
+        return tuple(self.method.encode(sample)[0])
+
+    def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """The inputs and targets of ``step`` (deterministic from the seed and the step)."""
+        spec = self.spec
+        n = len(self.train_paths)
+        first = step * spec.batch
+        idx = []
+        for j in range(first, first + spec.batch):
+            epoch, pos = divmod(j, n)
+            perm = derive_rng(spec.seed, "order", epoch).permutation(n)
+            idx.append(int(perm[pos]))
+        rng = derive_rng(spec.seed, "augment", step)
+        inputs, targets = [], []
+        for i in idx:
+            sample = load_sample(self.train_paths[i])
+            x = [t[0] for t in self.encode(sample)]
+            y = torch.from_numpy(sample.ground_truth)[None]
+            *x, y = augment([*x, y], rng, spec.crop)
+            inputs.append(x)
+            targets.append(y)
+        return [torch.stack([x[k] for x in inputs]) for k in range(len(inputs[0]))], torch.stack(targets)
+
+    # -- model -------------------------------------------------------------------------------------
+
+    def variants(self) -> list[str]:
+        """The variants this run validates and exports."""
+        return ["fusion", "spike"] if self.fusion else ["single"]
+
+    def step_variant(self, step: int) -> str:
+        if not self.fusion:
+            return "single"
+        spike = derive_rng(self.spec.seed, "modality", step).random() < self.data.spike_only_fraction
+        return "spike" if spike else "fusion"
+
+    def forward(self, inputs: Sequence[torch.Tensor], variant: str) -> torch.Tensor:
+        if variant == "spike":
+            return self.module.forward_texture_only(inputs[0])
+        return self.module(*inputs)
+
+    def loss(self, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+        pred = pred.float()
+        l1 = (pred - target).abs().mean()
+        ssim = self.ssim_loss(pred, target)
+        loss = l1 + self.data.ssim_weight * ssim
+        return loss, {"l1": l1.item(), "ssim_loss": ssim.item()}
+
+    def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
+        """The loss of step ``step`` (its batch, variant and forward pass) and what the log records."""
+        import time
+
+        variant = self.step_variant(step)
+        t0 = time.perf_counter()
+        inputs, target = self.batch(step)
+        t_data = time.perf_counter() - t0
+        with autocast():
+            pred = self.forward(inputs, variant)
+        loss, parts = self.loss(pred, target)
+        return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
+
+    @torch.no_grad()
+    def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:
+        import kornia
+
+        self.module.eval()
+        inputs, target = self.val_batch
+        preds = []
+        for i in range(0, target.shape[0], 8):
+            with autocast():
+                preds.append(self.forward([x[i:i + 8] for x in inputs], variant).float())
+        pred = torch.cat(preds).clamp(0, 1)
+        ssim = kornia.metrics.ssim(pred, target, window_size=11, max_val=1.0).mean(dim=(1, 2, 3))
+        self.module.train()
+        return {"val_l1": float((pred - target).abs().mean()), "val_psnr": float(_psnr(pred, target).mean()),
+                "val_ssim": float(ssim.mean())}
+
+    def exported(self, variant: str, name: str) -> tuple[str, dict[str, torch.Tensor], dict[str, Any]]:
+        """``(method name, tensors, parameters)`` of the weights ``variant`` exports."""
+        params = dict(self.method.params)
+        state = self.module.state_dict()
+        if variant == "spike":
+            state = {k: v for k, v in state.items() if not k.startswith(MOTION_PREFIXES)}
+            params["spike_only"] = True
+            name = f"{name}-spike"
+        return name, state, params
+
+    def describe_data(self) -> dict[str, Any]:
+        return {"simulator": "neuspike.simulation.cell.simulate_sample", "kind": "windows",
+                "train_items": self.data.train_items, "val_items": self.data.val_items,
+                "photos": list(self.data.photos), "procedural": "dead_leaves"}

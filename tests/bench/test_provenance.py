@@ -1,0 +1,44 @@
+"""What a run records of its command: no absolute path of the machine that made it."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from bench.provenance import command_line, portable_path
+
+
+def test_paths_inside_or_beside_the_current_folder_become_relative(tmp_path, monkeypatch):
+    work = tmp_path / "repo"
+    (work / "runs").mkdir(parents=True)
+    monkeypatch.chdir(work)
+    assert portable_path(str(work / "runs" / "light")) == os.path.join("runs", "light")
+    assert portable_path(str(tmp_path / "shared" / "weights")) == os.path.join("..", "shared", "weights")
+    assert portable_path("relative/as/typed") == "relative/as/typed"
+    far = "/var/lib/somewhere/deep/cache"
+    assert portable_path(far) == os.path.join("...", "deep", "cache")
+
+
+def test_the_command_names_the_module_and_no_absolute_path(tmp_path):
+    # run as `python -m` from another folder, with absolute paths as arguments
+    code = ("import json, sys; from bench.provenance import command_line; print(json.dumps(command_line()))")
+    module = tmp_path / "probe_cmd.py"
+    module.write_text(code)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[2]), str(tmp_path)])}
+    out = subprocess.run([sys.executable, "-m", "probe_cmd", "--out", str(tmp_path / "runs"),
+                          f"--weights={tmp_path / 'w'}", "--seeds", "0,1"],
+                         capture_output=True, text=True, cwd=tmp_path, env=env, check=True).stdout
+    import json
+
+    cmd = json.loads(out)
+    assert cmd == ["python", "-m", "probe_cmd", "--out", "runs", "--weights=w", "--seeds", "0,1"]
+    assert not any(str(tmp_path) in part for part in cmd)
+
+
+def test_a_script_run_by_path_is_named_without_its_folder(monkeypatch):
+    import types
+
+    monkeypatch.setitem(sys.modules, "__main__", types.SimpleNamespace(__spec__=None))
+    assert command_line(["/abs/path/to/script.py", "--x", "1"]) == ["python", "script.py", "--x", "1"]

@@ -1,0 +1,73 @@
+"""Weights: the registry entry's configuration reaches the resolver, the constructor builds then
+loads with no ordering for subclasses to work around, and a file that no longer matches its card warns."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import warnings
+
+import pytest
+import torch
+
+from baselines.firenet import FireNet, FireNetModule
+from neuspike.errors import InputError
+from neuspike.methods import WeightsConfig, create, entry, register, unregister
+from neuspike.weights import PACKAGE_WEIGHTS, WeightsMismatch, file_sha256, save_safetensors
+
+
+@pytest.fixture
+def copied(tmp_path):
+    """The shipped firenet-sim weights and card, copied into a user's folder."""
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(PACKAGE_WEIGHTS / f"firenet-sim{suffix}", tmp_path / f"firenet-sim{suffix}")
+    return tmp_path
+
+
+def test_the_shipped_weights_match_their_cards():
+    for card in sorted(PACKAGE_WEIGHTS.glob("*.json")):
+        assert json.loads(card.read_text())["sha256"] == file_sha256(card.with_suffix(".safetensors")), card.name
+
+
+def test_weights_that_no_longer_match_their_card_warn(copied):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        same = create("firenet-sim", weights_dir=copied, precision="float32")  # matching: silent
+    assert same.weights_path == copied / "firenet-sim.safetensors"
+    torch.manual_seed(1)
+    save_safetensors(FireNetModule(), copied / "firenet-sim.safetensors", dtype=None)  # retrained; old card kept
+    with pytest.warns(WeightsMismatch, match="differs from its card"):
+        changed = create("firenet-sim", weights_dir=copied, precision="float32")
+    assert changed.weights_sha256 == file_sha256(copied / "firenet-sim.safetensors") != same.weights_sha256
+
+
+def test_the_entry_carries_the_weights_configuration(tmp_path):
+    firenet = entry("firenet")
+    assert firenet.weights == WeightsConfig("firenet.pt", subdirs=("firenet",))
+    assert entry("e2vid").weights == WeightsConfig("e2vid.safetensors")
+    (tmp_path / "firenet").mkdir()
+    torch.manual_seed(2)
+    save_safetensors(FireNetModule(), tmp_path / "firenet" / "firenet-sim.safetensors", dtype=None)
+    # the sub-folder comes from the entry, not from the class
+    assert create("firenet-sim", weights_dir=tmp_path).weights_path == tmp_path / "firenet" / "firenet-sim.safetensors"
+    with pytest.raises(InputError, match="weights"):
+        register("test-bad-weights", FireNet, weights=3)
+    register("test-string-weights", FireNet, params={"normalize": True}, weights="firenet-sim.safetensors")
+    try:
+        assert entry("test-string-weights").weights == WeightsConfig("firenet-sim.safetensors")
+    finally:
+        unregister("test-string-weights")
+
+
+def test_for_training_builds_through_the_constructor_without_weights():
+    torch.manual_seed(0)
+    fresh = FireNet.for_training("firenet-sim", normalize=True)
+    torch.manual_seed(0)
+    again = FireNetModule()
+    assert fresh.weights_path is None and fresh.layout is None and fresh.params["precision"] == "float32"
+    for k, v in again.state_dict().items():
+        assert torch.equal(fresh.module.state_dict()[k], v), k
+    assert fresh.module.encoder.weight.is_contiguous()  # training runs in the default memory layout
+    shipped = create("firenet-sim")
+    assert shipped.layout == "safetensors" and shipped.module.encoder.weight.is_contiguous(
+        memory_format=torch.channels_last)

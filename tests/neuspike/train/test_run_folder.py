@@ -1,0 +1,241 @@
+"""The run folder across kills and trainers: old spec files and checkpoints resume, stale temporaries
+go, the log never repeats a step, a file size limit is a one-line error, the command answers fast."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from neuspike.errors import FormatError, InputError
+from neuspike.train import checkpoint as ck
+from neuspike.train.__main__ import build_parser, main, spec_from_args
+from neuspike.train.loop import Trainer, train
+from neuspike.train.spec import NOISE_LEVELS, SequenceData, TrainSpec, WindowData, load_spec, spec_from_dict
+
+ROOT = Path(__file__).resolve().parents[3]
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+PHOTOS = ["astronaut", "brick", "cat", "cell", "coffee", "grass", "hubble_deep_field", "immunohistochemistry", "page",
+          "rocket"]
+# spec.json as the sequence trainer (python -m neuspike.train.sequences e2vid --train-items 166 --threads 1) wrote it
+OLD_E2VID = {"batch": 4, "checkpoint_every": 10, "crop": 48, "data": {
+    "displacement_px": 8.0, "events_per_pixel": 0.35, "hdr_fraction": 0.5, "kinds": ["pan", "zoom", "fan"],
+    "noise_levels": ["none", "small", "medium", "high"], "photos": PHOTOS, "size": 128, "threshold_range": [0.1, 0.4],
+    "view": None, "windows": 8}, "init_from": None, "l1": 1.0, "length": 6, "lr": 0.0005, "lr_min": None,
+    "lr_warmup_steps": 50, "method": "e2vid", "occlusion_alpha": 50.0, "precision": "auto", "seed": 0, "ssim": 1.0,
+    "steps": 4000, "temporal": 1.0, "train_items": 166, "val_every": 50, "val_items": 8, "warmup": 2}
+# spec.json as the single-window trainer wrote it for the README's first NeuSpike-Net stage
+OLD_NSN = {"batch": 8, "checkpoint_every": 100, "crop": 64, "export": True, "init_from": None,
+           "light_range": [0.025, 0.6], "lr": 0.001, "lr_min": 1e-05, "method": "neuspike-net",
+           "motions": [16, 32, 64, 128, 256], "noise_levels": ["none", "small", "medium", "high"],
+           "out_dir": "runs/neuspike-net", "params": {}, "photos": PHOTOS, "precision": "auto", "seed": 0,
+           "shard_dir": "runs/shard", "shard_size": 2000, "spike_only_fraction": 0.3, "ssim_weight": 1.0,
+           "ssim_window": 11, "steps": 1600, "threads": 1, "val_every": 200, "val_size": 32, "view": 128,
+           "warmup": 100, "weight_decay": 0.0001, "workers": 2}
+
+
+def _args(line: str):
+    return spec_from_args(build_parser().parse_args(line.split()))
+
+
+def test_the_light_spec_module_agrees_with_the_heavy_ones():
+    from neuspike.conditions import NOISE_LEVELS as levels
+    from neuspike.scenes.photos import TRAIN_PHOTOS
+
+    assert tuple(NOISE_LEVELS) == tuple(levels) and WindowData().photos == tuple(TRAIN_PHOTOS) == tuple(PHOTOS)
+
+
+def test_old_spec_files_are_the_runs_the_new_command_makes():
+    """A folder of either earlier trainer resumes under python -m neuspike.train with the same flags."""
+    old = spec_from_dict(OLD_E2VID, out_dir="runs/e2vid")
+    assert old.kind == "sequences" and old.optimizer == "adam" and old.warmup == 50 and old.data.warmup_windows == 2
+    assert old.identity() == _args("e2vid --train-items 166 --threads 1").identity()
+    assert old.data.key() == "f40df6737f28"
+    nsn = spec_from_dict(OLD_NSN)
+    line = ("neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 --val-windows 32 --val-every 200 --lr 1e-3 "
+            "--warmup 100 --spike-only-fraction 0.3 --threads 1 --export")
+    assert nsn.identity() == _args(line).identity() and nsn.data.train_items == 2000
+    firenet = dict(OLD_E2VID, method="firenet-sim", lr=0.001, crop=64, length=8, steps=3000, checkpoint_every=25,
+                   precision="float32")
+    assert spec_from_dict(firenet).identity() == _args("firenet-sim --train-items 166 --threads 1").identity()
+    # a spec frozen before lr_min, view and hdr_fraction existed reads with their defaults: a constant rate
+    older = {k: v for k, v in OLD_E2VID.items() if k != "lr_min"}
+    older["data"] = {k: v for k, v in OLD_E2VID["data"].items() if k not in ("view", "hdr_fraction")}
+    assert spec_from_dict(older, out_dir="runs/e2vid") == old
+    for stage in ("spec_stage2.json", "spec_stage3.json"):
+        path = ROOT / "reports" / "neuspike-net" / stage
+        if path.is_file():
+            assert load_spec(path).data.train_items == 2000
+    with pytest.raises(InputError, match="unknown spec keys"):
+        spec_from_dict({**OLD_NSN, "colour": 1})
+    # the current form round-trips
+    assert spec_from_dict(json.loads(json.dumps(old.as_dict()))) == old
+
+
+def _tiny_windows(tmp_path, out: str) -> TrainSpec:
+    data = WindowData(shard_dir=str(tmp_path / "shard"), view=16, train_items=3, val_items=2, workers=1)
+    return TrainSpec(data=data, out_dir=str(tmp_path / out), steps=4, batch=2, crop=16, val_every=2,
+                     checkpoint_every=2, warmup=2, precision="float32", threads=1)
+
+
+def _tiny_sequences(tmp_path, out: str) -> TrainSpec:
+    data = SequenceData(size=32, windows=3, kinds=("pan",), noise_levels=("none",), displacement_px=6.0,
+                        train_items=2, val_items=1, length=3, warmup_windows=1, shard_root=str(tmp_path / "shards"))
+    return TrainSpec(method="firenet-sim", data=data, out_dir=str(tmp_path / out), crop=24, batch=2,
+                     optimizer="adam", weight_decay=0.0, lr=2e-4, lr_min=None, warmup=1, steps=4, val_every=2,
+                     checkpoint_every=1, precision="float32", threads=None)
+
+
+def _old_window_folder(spec: TrainSpec) -> None:
+    """Turn a run folder killed after step 2 into what the single-window trainer left."""
+    out = Path(spec.out_dir)
+    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    old = {"step": state["step"], "model": state["module"], "optim": state["optimizer"],
+           "best": {v: b["val_psnr"] for v, b in state["best"].items()}, "torch_rng": state["torch_rng"]}
+    buf = io.BytesIO()
+    torch.save(old, buf)
+    (out / "checkpoint.pt").write_bytes(buf.getvalue())
+    d = spec.data
+    flat = {**{k: v for k, v in spec.as_dict().items() if k not in ("data", "optimizer", "export_dir")},
+            "shard_dir": d.shard_dir, "view": d.view, "shard_size": d.train_items, "val_size": d.val_items,
+            "light_range": list(d.light_range), "motions": list(d.motions), "noise_levels": list(d.noise_levels),
+            "photos": list(d.photos), "workers": d.workers, "ssim_weight": d.ssim_weight,
+            "ssim_window": d.ssim_window, "spike_only_fraction": d.spike_only_fraction}
+    (out / "spec.json").write_text(json.dumps(flat))
+    rows = list(csv.DictReader(open(out / "train_log.csv")))
+    old_cols = ("step", "kind", "loss", "l1", "ssim_loss", "lr", "seconds", "samples_per_s", "val_l1", "val_psnr",
+                "val_ssim", "variant")
+    with open(out / "train_log.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=old_cols)
+        w.writeheader()
+        w.writerows({k: r[k] for k in old_cols} for r in rows)
+        w.writerow({"step": 3, "kind": "train", "loss": 9.0, "variant": "fusion"})  # logged, then killed
+
+
+def _old_sequence_folder(spec: TrainSpec) -> None:
+    """Turn a run folder killed after step 2 into what the sequence trainer left."""
+    out = Path(spec.out_dir)
+    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    best = state["best"].get("main", {"val_ssim": -1.0})
+    old = {"module": state["module"], "optimizer": state["optimizer"], "step": state["step"], "best": best,
+           "wall_s": state["wall_s"]}
+    buf = io.BytesIO()
+    torch.save(old, buf)
+    (out / "checkpoint.pt").write_bytes(buf.getvalue())
+    d = spec.data
+    data = {k: v for k, v in dataclasses.asdict(d).items() if k in SequenceData.KEY_FIELDS}
+    seq = {"method": spec.method, "data": data, "seed": spec.seed, "train_items": d.train_items,
+           "val_items": d.val_items, "crop": spec.crop, "batch": spec.batch, "length": d.length,
+           "warmup": d.warmup_windows, "lr": spec.lr, "lr_warmup_steps": spec.warmup, "lr_min": spec.lr_min,
+           "l1": d.l1, "ssim": d.ssim, "temporal": d.temporal, "occlusion_alpha": d.occlusion_alpha,
+           "steps": spec.steps, "val_every": spec.val_every, "checkpoint_every": spec.checkpoint_every,
+           "precision": spec.precision, "init_from": spec.init_from}
+    (out / "spec.json").write_text(json.dumps(seq))
+    rows = list(csv.DictReader(open(out / "train_log.csv")))
+    cols = ["step", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds_per_step", "wall_s", "val_l1", "val_ssim",
+            "val_ssim_last"]
+    merged: dict[str, dict] = {}
+    for r in rows:  # the sequence trainer wrote a validation's scores into its step's row
+        if r["kind"] == "train":
+            merged[r["step"]] = {**{k: r.get(k, "") for k in cols}, "seconds_per_step": r["seconds"]}
+        else:
+            merged[r["step"]].update({k: r[k] for k in ("val_l1", "val_ssim", "val_ssim_last")})
+    with open(out / "train_log.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(merged.values())
+        w.writerow({"step": 3, "loss": 9.0})  # logged, then killed before the checkpoint
+
+
+@pytest.mark.parametrize("make,old", [(_tiny_windows, _old_window_folder), (_tiny_sequences, _old_sequence_folder)])
+def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights(tmp_path, make, old):
+    """Kill after step 2 (in-process), rewrite the folder as the earlier trainer left it, add the
+    temporaries a kill mid-write leaves and a log row past the checkpoint; the rerun ends with the
+    straight run's weights, no temporaries and a log without repeated steps."""
+    straight = train(make(tmp_path, "a"), quiet=True)
+    spec = make(tmp_path, "b")
+    assert train(spec, quiet=True, until=2)["step"] == 2
+    old(spec)
+    out = Path(spec.out_dir)
+    stale = [out / ".checkpoint.pt.x1y2.tmp", out / ".spec.json.z3w4.tmp", out / ".train_log.csv.q5.tmp"]
+    for p in stale:
+        p.write_bytes(b"half-written")
+    again = train(spec, quiet=True)
+    assert again["resumed"] and again["step"] == straight["step"] == 4
+    a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)
+    b = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert b["format"] == ck.CHECKPOINT_FORMAT
+    for k in a["module"]:
+        assert torch.equal(a["module"][k], b["module"][k]), k
+    assert not [p for p in stale if p.exists()] and not list(out.glob(".*.tmp"))
+    rows = list(csv.DictReader(open(out / "train_log.csv")))
+    train_steps = [int(r["step"]) for r in rows if r["kind"] == "train"]
+    assert train_steps == [1, 2, 3, 4]
+    assert "9.0" not in {r["loss"] for r in rows}
+
+
+def test_an_unknown_checkpoint_is_a_format_error(tmp_path):
+    with pytest.raises(FormatError, match="not a training checkpoint"):
+        ck.upgrade_checkpoint({"weights": 1}, score_key="val_psnr", variants=["single"])
+    (tmp_path / "checkpoint.pt").write_bytes(b"not torch")
+    with pytest.raises(FormatError, match="checkpoint"):
+        ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+
+
+def test_a_method_of_the_wrong_data_kind_is_refused(tmp_path):
+    spec = dataclasses.replace(_tiny_sequences(tmp_path, "x"), method="neuspike-net")
+    with pytest.raises(InputError, match="trains on windows"):
+        Trainer(spec, quiet=True)
+
+
+def _run(code: str, **kw) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=kw.get("cwd"),
+                          timeout=600)
+
+
+def test_help_and_usage_errors_answer_before_torch_is_imported(capsys):
+    probe = _run("import sys\nfrom neuspike.train.__main__ import build_parser\n"
+                 "build_parser().parse_args(['e2vid', '--steps', '3'])\nprint('torch' in sys.modules)")
+    assert probe.stdout.strip() == "False", probe.stderr
+    t0 = time.perf_counter()
+    helped = subprocess.run([sys.executable, "-m", "neuspike.train", "--help"], capture_output=True, text=True,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=60)
+    assert helped.returncode == 0 and "sequences" in helped.stdout and "--run-dir" in helped.stdout
+    assert time.perf_counter() - t0 < 5  # well under torch's import time on a loaded machine
+    with pytest.raises(SystemExit) as exit_:
+        main(["e2vid", "--steps", "many"])
+    assert exit_.value.code == 2
+    capsys.readouterr()
+    assert main(["neuspike-net", "--size", "64", "--kinds", "pan"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--size, --kinds: not for 'neuspike-net'" in err[0]
+    assert main(["e2vid", "--spike-only-fraction", "0.5"]) == 2
+    assert main(["e2vid", "--export", "--no-export"]) == 2
+
+
+def test_a_file_size_limit_is_a_one_line_error_and_leaves_no_temporaries(tmp_path):
+    """``ulimit -f`` during training: the checkpoint cannot be written; one line, exit 2, nothing half-written."""
+    code = f"""
+import resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (1 << 20, 1 << 20))
+from neuspike.train.__main__ import main
+sys.exit(main(["neuspike-net", "--out", {str(tmp_path / "run")!r}, "--shard", {str(tmp_path / "shard")!r},
+               "--quick", "--steps", "2", "--workers", "1", "--precision", "float32", "--quiet"]))
+"""
+    done = _run(code)
+    err = done.stderr.strip().splitlines()
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert len(err) == 1 and "File too large" in err[0] and "Traceback" not in done.stderr
+    assert not list((tmp_path / "run").glob(".*.tmp"))
