@@ -20,8 +20,14 @@ and writes, in ``--out``:
 ``video.json``
     the settings, the frame times, the recording's metadata and each method's frames per second.
 
-Everything is written under temporary names and renamed when complete; a failed run leaves no
-file under a final name. Errors print one line and exit with status 2.
+The folder is written whole under a temporary name beside ``--out`` and swapped in when complete
+(:func:`neuspike.formats.staging.staged_folder`): after a failure or a kill ``--out`` is entirely the
+earlier run's. A run replaces every output of the earlier one, the videos and frames of methods it
+no longer runs included (its ``video.json`` names them); other files in ``--out`` are kept. A video
+is published only when it is a whole MPEG-4 file (OpenCV does not report failed writes: a full disk
+or a file size limit is an error, not a truncated video). Ground truth of a recording smaller than
+the SSIM window is not used, as for a single frame (:mod:`neuspike.recordings`). Errors print one
+line and exit with status 2.
 """
 
 from __future__ import annotations

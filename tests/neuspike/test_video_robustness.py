@@ -146,3 +146,13 @@ def test_a_recording_smaller_than_the_ssim_window_is_written_without_scores(tmp_
     assert "not used: 8x8 is smaller than the 11x11 SSIM window" in captured.out
     assert "error" not in captured.err
     assert (tmp_path / "v" / "tfp.mp4").is_file() and not (tmp_path / "v" / "metrics.csv").exists()
+
+
+def test_a_rerun_replaces_the_earlier_runs_outputs_and_keeps_other_files(finished):
+    args, out, before = finished
+    assert main(args + ["--method", "tfp,tfi"]) == 0
+    (out / "notes.txt").write_text("mine")
+    assert main(args + ["--method", "tfi"]) == 0
+    names = {p.name for p in out.iterdir()}
+    assert "tfp.mp4" not in names and "tfp" not in names  # no video of a method this run did not make
+    assert {"tfi.mp4", "tfi", "video.json", "notes.txt"} <= names and (out / "notes.txt").read_text() == "mine"
