@@ -25,7 +25,8 @@ In each cell
 Worker set-up (:class:`WorkerSetup`, applied once per process and idempotent): plug-in modules are
 imported (:func:`load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable)
 and torch's intra-op thread count is set. The weights folder and device travel in the set-up and are
-passed to :func:`neuspike.methods.create`; nothing is exported through the environment.
+passed to :func:`neuspike.methods.create_many`, which builds each method once per process
+(:func:`instances`); nothing is exported through the environment.
 """
 
 from __future__ import annotations
@@ -74,7 +75,7 @@ class WorkerSetup:
         Modules (dotted names or paths to ``.py`` files) to import; each registers its methods
         with :func:`neuspike.methods.register` when imported.
     weights : str or None
-        Folder of published weights the user named (passed to :func:`neuspike.methods.create`).
+        Folder of published weights the user named (passed to :func:`neuspike.methods.create_many`).
     threads : int or None
         torch intra-op threads per worker (``None`` leaves torch's default).
     device : str

@@ -362,6 +362,8 @@ def method_names(text: str | None) -> tuple[str, ...]:
         names = parse_list(text)
         for name in names:
             registry.entry(name)  # unknown names raise with the list of known ones
+        if len(set(names)) != len(names):
+            raise InputError(f"--methods repeats a name: {text!r}")
         return names
     names = tuple(registry.available())
     if not names:

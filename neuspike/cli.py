@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
 
-__all__ = ["UsageError", "ArgumentParser"]
+__all__ = ["UsageError", "ArgumentParser", "WEIGHTS_ENV", "weights_dir_from_env"]
+
+#: Environment variable naming the folder of published weights (read by command-line entry points only).
+WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
 
 
 class UsageError(Exception):
@@ -17,3 +22,14 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise UsageError(message)
+
+
+def weights_dir_from_env(cli_value: str | os.PathLike | None) -> Path | None:
+    """The weights folder of a command line: its ``--weights`` value, else ``$NEUSPIKE_WEIGHTS``, else ``None``.
+
+    Only ``main()`` functions call this; library code takes the folder as an argument.
+    """
+    if cli_value is not None:
+        return Path(cli_value).resolve()
+    env = os.environ.get(WEIGHTS_ENV)
+    return Path(env).resolve() if env else None

@@ -82,6 +82,9 @@ def resolve_device(device: str | torch.device | None) -> torch.device:
                          f"{torch.cuda.device_count()} CUDA device(s), numbered from 0")
     if dev.type not in ("cpu", "cuda", "mps", "xpu"):
         raise InputError(f"device: {device!r} is not supported (cpu, cuda, mps or xpu)")
+    backend = {"mps": getattr(torch.backends, "mps", None), "xpu": getattr(torch, "xpu", None)}.get(dev.type)
+    if dev.type in ("mps", "xpu") and not (backend is not None and backend.is_available()):
+        raise InputError(f"device: {device!r} was asked for but this machine has no {dev.type.upper()} device")
     return dev
 
 

@@ -20,15 +20,13 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
-import numpy as np
-
-from neuspike.atomic import write_bytes
-from neuspike.cli import ArgumentParser, UsageError
+from neuspike.cli import WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
 from neuspike.errors import InputError, NeuSpikeError
-from neuspike.images import encode_png
-from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
+
+if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
+    import numpy as np
 
 #: The data range every metric is computed with (methods return images in [0, 1]).
 DATA_RANGE = 1.0
@@ -166,6 +164,8 @@ def _warn_entry_point_problems() -> None:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
+    from neuspike.atomic import write_bytes
+
     write_bytes(path, data)
 
 
@@ -177,6 +177,10 @@ def write_outputs(out: Path, name: str, image: np.ndarray) -> tuple[Path, Path]:
     image : ndarray float32 (H, W) in [0, 1] (a method's checked output)
     """
     import io
+
+    import numpy as np
+
+    from neuspike.images import encode_png
 
     out.mkdir(parents=True, exist_ok=True)
     png = encode_png(image, clip=False)

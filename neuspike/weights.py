@@ -32,6 +32,7 @@ import torch
 from torch import nn
 
 from neuspike import atomic
+from neuspike.cli import WEIGHTS_ENV, weights_dir_from_env  # noqa: F401  (the command line's; re-exported)
 from neuspike.errors import FormatError
 from neuspike.methods import MethodUnavailable
 
@@ -51,8 +52,6 @@ __all__ = [
     "weights_dir_from_env",
 ]
 
-#: Environment variable naming the folder of published weights (read by command-line entry points only).
-WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"
 #: Folder of the weights trained here, shipped with the package.
 PACKAGE_WEIGHTS = Path(__file__).resolve().parent / "trained"
 
@@ -82,17 +81,6 @@ def check_card(path: str | os.PathLike, sha256: str) -> None:
         warnings.warn(f"{path}: sha256 {sha256[:12]}... differs from its card's {str(recorded)[:12]}...; "
                       "the file changed after it was exported (its card no longer describes it)",
                       WeightsMismatch, stacklevel=3)
-
-
-def weights_dir_from_env(cli_value: str | os.PathLike | None) -> Path | None:
-    """The weights folder of a command line: its ``--weights`` value, else ``$NEUSPIKE_WEIGHTS``, else ``None``.
-
-    Only ``main()`` functions call this; library code takes the folder as an argument.
-    """
-    if cli_value is not None:
-        return Path(cli_value).resolve()
-    env = os.environ.get(WEIGHTS_ENV)
-    return Path(env).resolve() if env else None
 
 
 def resolve_weights(file_name: str, weights_dir: str | os.PathLike | None, *,

@@ -6,14 +6,15 @@
 is the command (:mod:`neuspike.video.cli`).
 """
 
-from neuspike.video.stream import (
-    VideoRecording,
-    check_fps,
-    frame_times,
-    open_recording,
-    reconstruct_video,
-    stream_methods,
-    stream_samples,
-)
+from typing import Any
 
 __all__ = ["VideoRecording", "check_fps", "frame_times", "open_recording", "reconstruct_video", "stream_methods", "stream_samples"]
+
+
+def __getattr__(name: str) -> Any:
+    """The streaming names, imported on first use (``python -m neuspike.video --help`` needs none of them)."""
+    if name in __all__:
+        from neuspike.video import stream
+
+        return getattr(stream, name)
+    raise AttributeError(f"module 'neuspike.video' has no attribute {name!r}")

@@ -20,8 +20,14 @@ and writes, in ``--out``:
 ``video.json``
     the settings, the frame times, the recording's metadata and each method's frames per second.
 
-Everything is written under temporary names and renamed when complete; a failed run leaves no
-file under a final name. Errors print one line and exit with status 2.
+The folder is written whole under a temporary name beside ``--out`` and swapped in when complete
+(:func:`neuspike.formats.staging.staged_folder`): after a failure or a kill ``--out`` is entirely the
+earlier run's. A run replaces every output of the earlier one, the videos and frames of methods it
+no longer runs included (its ``video.json`` names them); other files in ``--out`` are kept. A video
+is published only when it is a whole MPEG-4 file (OpenCV does not report failed writes: a full disk
+or a file size limit is an error, not a truncated video). Ground truth of a recording smaller than
+the SSIM window is not used, as for a single frame (:mod:`neuspike.recordings`). Errors print one
+line and exit with status 2.
 """
 
 from __future__ import annotations
@@ -34,12 +40,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Sequence
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Sequence
 
 from neuspike.cli import ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError
+
+if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
+    import numpy as np
 
 __all__ = ["VideoSpec", "build_parser", "run", "main"]
 
@@ -141,7 +148,7 @@ def _split(values: Sequence[str]) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     """The frozen spec of parsed arguments (usage checks only; files are checked by :func:`run`)."""
-    from neuspike.weights import weights_dir_from_env
+    from neuspike.cli import weights_dir_from_env
 
     if args.out is None:
         raise InputError("give an output folder with --out DIR")
@@ -196,6 +203,16 @@ def _range(spec: VideoSpec, span: tuple[float, float]) -> tuple[float, float]:
     return start, end
 
 
+def _history(spec: VideoSpec) -> float:
+    """Seconds of event history before each window (``--event-history``, default the single-frame one)."""
+    from neuspike.recordings import EVENT_HISTORY_S
+
+    history = EVENT_HISTORY_S if spec.event_history_s is None else spec.event_history_s
+    if history < 0 or not math.isfinite(history):
+        raise InputError(f"--event-history must be >= 0 seconds, got {history!r}")
+    return history
+
+
 def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
     """Write the videos of ``spec`` (see the module docstring); returns the summary written to ``video.json``.
 
@@ -205,13 +222,12 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         A failed check; nothing is written when the checks before the work fail, and nothing
         under a final name when the work fails.
     """
-    from neuspike.atomic import write_text
-    from neuspike.recordings import EVENT_HISTORY_S
-    from neuspike.video.stream import check_fps, frame_times, open_recording, stream_methods
-    from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, ground_truth_for, plot_metrics, score_frame
-    from neuspike.video.writers import (
-        LABEL_BAND_PX, FrameFolder, Mp4Writer, check_writable, contact_sheet, label_image, tile_row, to_uint8, write_png,
-    )
+    import numpy as np
+
+    from neuspike.formats.staging import check_writable_folder, staged_folder
+    from neuspike.metrics import SSIM_WINDOW_SIDE
+    from neuspike.video.stream import check_fps, frame_times, open_recording
+    from neuspike.video.truth import ground_truth_for
 
     stream = stream if stream is not None else sys.stdout
     if spec.play_fps <= 0 or not math.isfinite(spec.play_fps):
@@ -220,9 +236,7 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         raise InputError(f"--sheet-frames must be at least 1, got {spec.sheet_frames}")
     if spec.sheet_width < 64:
         raise InputError(f"--sheet-width must be at least 64 pixels, got {spec.sheet_width}")
-    history = EVENT_HISTORY_S if spec.event_history_s is None else spec.event_history_s
-    if history < 0 or not math.isfinite(history):
-        raise InputError(f"--event-history must be >= 0 seconds, got {history!r}")
+    _history(spec)
     with open_recording(spec.recording, spikes=spec.spikes, events=spec.events, height=spec.height,
                         width=spec.width, raw_width=spec.raw_width, plane_rate_hz=spec.plane_rate_hz,
                         gain=spec.gain) as rec:
@@ -231,8 +245,13 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         fps = check_fps(spec.fps, rec, inputs)
         start, end = _range(spec, rec.span_s())
         times = frame_times(start, end, fps)
-        out = check_writable(spec.out)
+        final = check_writable_folder(spec.out, what="--out", create=False)
         truth = ground_truth_for(rec.folder, rec.meta, height=rec.height, width=rec.width, tolerance_s=0.5 / fps)
+        if truth is not None and min(rec.height, rec.width) < SSIM_WINDOW_SIDE:
+            # as a single-frame load: ground truth found beside a recording too small to score is not used
+            print(f"note: ground truth ({truth.source}) not used: {rec.width}x{rec.height} is smaller than the "
+                  f"{SSIM_WINDOW_SIDE}x{SSIM_WINDOW_SIDE} SSIM window, so no frame can be scored", file=stream)
+            truth = None
         n = len(times)
         sheet_idx = sorted(set(np.linspace(0, n - 1, min(spec.sheet_frames, n)).round().astype(int).tolist()))
         print(f"recording: {rec.width}x{rec.height}, {', '.join(sorted(rec.modalities))}, "
@@ -240,123 +259,177 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
               f"ground truth: {truth.source if truth else 'none'}", file=stream)
 
         names = [m.name for m in methods]
-        rows = names + (["ground truth"] if truth is not None else [])
-        h, w = rec.height, rec.width
-        band = LABEL_BAND_PX
-        writers: list[Any] = []
+        staging = None
         try:
-            videos = {name: Mp4Writer(out / f"{name}.mp4", fps=spec.play_fps, width=w, height=h) for name in names}
-            writers += videos.values()
-            folders = {}
-            if spec.frames:
-                folders = {name: FrameFolder(out / name, png="png" in spec.frames, npy="npy" in spec.frames)
-                           for name in names}
-                writers += folders.values()
-            cmp_w = len(rows) * w + 4 * (len(rows) - 1)
-            compare = Mp4Writer(out / "compare.mp4", fps=spec.play_fps, width=cmp_w, height=h + band)
-            writers.append(compare)
-            metric_rows: list[dict[str, Any]] = []
-            flicker = {name: FlickerMeter() for name in names}
-            sheet: dict[str, list[np.ndarray]] = {r: [] for r in rows}
-            busy = {name: 0.0 for name in names}
-            bar = None
-            if spec.progress:
-                from tqdm import tqdm
-
-                bar = tqdm(total=n, unit="frame", desc="video", file=sys.stderr)
-            wall0 = time.perf_counter()
-            for k, (sample, images, seconds) in enumerate(
-                stream_methods(methods, rec, times, window_planes=spec.window_planes, event_history_s=history)
-            ):
-                t = sample.key_time_s
-                gt = truth.at(t) if truth is not None else None
-                tiles = []
-                for name in names:
-                    img = images[name]
-                    busy[name] += seconds[name]
-                    img8 = to_uint8(img)
-                    videos[name].write(img8)
-                    if name in folders:
-                        folders[name].write(img)
-                    tiles.append(label_image(img8, name))
-                    if gt is not None:
-                        p, s = score_frame(img, gt[1])
-                        f = flicker[name].update(img, gt[1])
-                        metric_rows.append({"method": name, "frame": k, "time_s": f"{t:.9f}",
-                                            "gt_time_s": f"{gt[0]:.9f}", "gt_source": truth.source,
-                                            "psnr_db": f"{p:.4f}", "ssim": f"{s:.5f}",
-                                            "flicker_rmse": "" if math.isnan(f) else f"{f:.6f}",
-                                            "normalisation": getattr(methods[names.index(name)], "last_normalisation", "")})
-                    elif truth is not None:
-                        flicker[name].update(img, None)
-                    if k in sheet_idx:
-                        sheet[name].append(img)
-                if truth is not None:
-                    gimg = gt[1] if gt is not None else np.zeros((h, w), np.float32)
-                    tiles.append(label_image(to_uint8(gimg), "ground truth" if gt is not None else "(no ground truth)"))
-                    if k in sheet_idx:
-                        sheet["ground truth"].append(gimg)
-                compare.write(tile_row(tiles))
-                if bar is not None:
-                    bar.update(1)
-            wall = time.perf_counter() - wall0
-            if bar is not None:
-                bar.close()
-            sheet_img = contact_sheet([(r, sheet[r]) for r in rows], [float(times[i]) for i in sheet_idx],
-                                      max_width_px=spec.sheet_width)
-            for wtr in writers:
-                wtr.close()
-        except BaseException:
-            for wtr in writers:
-                wtr.abort()
+            with staged_folder(final, ours=_our_entries(final, names)) as staging:
+                summary = _write(spec, rec, methods, times, fps, start, end, truth, sheet_idx, staging, stream)
+        except (NeuSpikeError, OSError) as exc:
+            if staging is not None:  # name the output folder, not its temporary stand-in
+                _rename_in(exc, str(staging), str(final))
             raise
-        write_png(out / "contact_sheet.png", sheet_img)
-        if metric_rows:
-            from neuspike.atomic import replacing
-
-            with replacing(out / "metrics.csv") as tmp, open(tmp, "w", newline="") as fh:
-                wr = csv.DictWriter(fh, fieldnames=list(METRIC_COLUMNS))
-                wr.writeheader()
-                wr.writerows(metric_rows)
-            plot_metrics(out / "metrics.csv", out / "metrics.png")
-        per_method = {}
-        for m in methods:
-            scored = [r for r in metric_rows if r["method"] == m.name]
-            fl = [float(r["flicker_rmse"]) for r in scored if r["flicker_rmse"] != ""]
-            per_method[m.name] = {
-                "inputs": sorted(m.inputs),
-                "normalisation": m.last_normalisation,
-                "method_seconds": busy[m.name],
-                "method_frames_per_s": n / busy[m.name] if busy[m.name] > 0 else None,
-                "scored_frames": len(scored),
-                "mean_psnr_db": float(np.mean([float(r["psnr_db"]) for r in scored])) if scored else None,
-                "mean_ssim": float(np.mean([float(r["ssim"]) for r in scored])) if scored else None,
-                "mean_flicker_rmse": float(np.mean(fl)) if fl else None,
-            }
-        summary = {
-            "spec": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(spec).items()},
-            "recording": {"width": w, "height": h, "modalities": sorted(rec.modalities),
-                          "plane_rate_hz": rec.plane_rate_hz, "span_s": list(rec.span_s()), "gain": rec.gain,
-                          "gain_source": rec.gain_source, "folder": str(rec.folder)},
-            "frames": n, "fps": fps, "start_s": start, "end_s": end,
-            "ground_truth": truth.source if truth is not None else None,
-            "wall_seconds": wall, "wall_frames_per_s": n / wall if wall > 0 else None,
-            "real_time_factor": (end - start) / wall if wall > 0 else None,
-            "methods": per_method,
-        }
-        write_text(out / "video.json", json.dumps(summary, indent=2, default=str) + "\n")
-    for name, m in per_method.items():
+    for name, m in summary["methods"].items():
         line = f"{name}: {m['method_frames_per_s']:.1f} frames/s (method time)"
         if m["mean_psnr_db"] is not None:
             line += f"; mean PSNR {m['mean_psnr_db']:.2f} dB, SSIM {m['mean_ssim']:.4f}"
             if m["mean_flicker_rmse"] is not None:
                 line += f", flicker {m['mean_flicker_rmse']:.4f}"
         print(line, file=stream)
-    print(f"wrote {out}/: {', '.join(n + '.mp4' for n in names)}, compare.mp4, contact_sheet.png"
-          f"{', metrics.csv, metrics.png' if metric_rows else ''}, video.json "
+    n, wall = summary["frames"], summary["wall_seconds"]
+    scored = any(m["scored_frames"] for m in summary["methods"].values())
+    print(f"wrote {final}/: {', '.join(name + '.mp4' for name in names)}, compare.mp4, contact_sheet.png"
+          f"{', metrics.csv, metrics.png' if scored else ''}, video.json "
           f"({n} frames in {wall:.2f} s, {n / wall:.1f} frames/s)", file=stream)
     return summary
 
+
+def _rename_in(exc: BaseException, old: str, new: str) -> None:
+    """Replace the path ``old`` by ``new`` in the message of ``exc`` (in place)."""
+    if isinstance(exc, OSError) and not isinstance(exc, NeuSpikeError) and exc.strerror is not None:
+        for attr in ("filename", "filename2"):
+            value = getattr(exc, attr, None)
+            if isinstance(value, str):
+                setattr(exc, attr, value.replace(old, new))
+    else:
+        exc.args = tuple(a.replace(old, new) if isinstance(a, str) else a for a in exc.args)
+
+
+#: What a run writes besides its methods' ``NAME.mp4`` and ``NAME/``.
+OUTPUTS = ("compare.mp4", "contact_sheet.png", "metrics.csv", "metrics.png", "video.json")
+
+
+def _our_entries(out: Path, names: Sequence[str]) -> set[str]:
+    """The entries of ``out`` a run replaces: its own, and those of the run that wrote ``out`` before
+    (named by its ``video.json``), so that no method's old video stays beside the new ones."""
+    methods = set(names)
+    try:
+        methods |= {str(name) for name in json.loads((out / "video.json").read_text()).get("methods", {})}
+    except (OSError, ValueError, AttributeError):
+        pass
+    return {e for name in methods for e in (name, f"{name}.mp4")} | set(OUTPUTS)
+
+
+def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps: float, start: float, end: float,
+           truth: Any, sheet_idx: list[int], out: Path, stream: Any) -> dict[str, Any]:
+    """Stream ``rec`` through ``methods`` and write every output into ``out`` (a staging folder);
+    return the summary written to ``video.json``."""
+    import numpy as np
+
+    from neuspike.atomic import write_text
+    from neuspike.video.stream import stream_methods
+    from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, plot_metrics, score_frame
+    from neuspike.video.writers import (
+        LABEL_BAND_PX, FrameFolder, Mp4Writer, contact_sheet, label_image, tile_row, to_uint8, write_png,
+    )
+
+    history = _history(spec)
+    n = len(times)
+    names = [m.name for m in methods]
+    rows = names + (["ground truth"] if truth is not None else [])
+    h, w = rec.height, rec.width
+    band = LABEL_BAND_PX
+    writers: list[Any] = []
+    try:
+        videos = {name: Mp4Writer(out / f"{name}.mp4", fps=spec.play_fps, width=w, height=h) for name in names}
+        writers += videos.values()
+        folders = {}
+        if spec.frames:
+            folders = {name: FrameFolder(out / name, png="png" in spec.frames, npy="npy" in spec.frames)
+                       for name in names}
+            writers += folders.values()
+        cmp_w = len(rows) * w + 4 * (len(rows) - 1)
+        compare = Mp4Writer(out / "compare.mp4", fps=spec.play_fps, width=cmp_w, height=h + band)
+        writers.append(compare)
+        metric_rows: list[dict[str, Any]] = []
+        flicker = {name: FlickerMeter() for name in names}
+        sheet: dict[str, list[np.ndarray]] = {r: [] for r in rows}
+        busy = {name: 0.0 for name in names}
+        bar = None
+        if spec.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n, unit="frame", desc="video", file=sys.stderr)
+        wall0 = time.perf_counter()
+        for k, (sample, images, seconds) in enumerate(
+            stream_methods(methods, rec, times, window_planes=spec.window_planes, event_history_s=history)
+        ):
+            t = sample.key_time_s
+            gt = truth.at(t) if truth is not None else None
+            tiles = []
+            for name in names:
+                img = images[name]
+                busy[name] += seconds[name]
+                img8 = to_uint8(img)
+                videos[name].write(img8)
+                if name in folders:
+                    folders[name].write(img)
+                tiles.append(label_image(img8, name))
+                if gt is not None:
+                    p, s = score_frame(img, gt[1])
+                    f = flicker[name].update(img, gt[1])
+                    metric_rows.append({"method": name, "frame": k, "time_s": f"{t:.9f}",
+                                        "gt_time_s": f"{gt[0]:.9f}", "gt_source": truth.source,
+                                        "psnr_db": f"{p:.4f}", "ssim": f"{s:.5f}",
+                                        "flicker_rmse": "" if math.isnan(f) else f"{f:.6f}",
+                                        "normalisation": getattr(methods[names.index(name)], "last_normalisation", "")})
+                elif truth is not None:
+                    flicker[name].update(img, None)
+                if k in sheet_idx:
+                    sheet[name].append(img)
+            if truth is not None:
+                gimg = gt[1] if gt is not None else np.zeros((h, w), np.float32)
+                tiles.append(label_image(to_uint8(gimg), "ground truth" if gt is not None else "(no ground truth)"))
+                if k in sheet_idx:
+                    sheet["ground truth"].append(gimg)
+            compare.write(tile_row(tiles))
+            if bar is not None:
+                bar.update(1)
+        wall = time.perf_counter() - wall0
+        if bar is not None:
+            bar.close()
+        sheet_img = contact_sheet([(r, sheet[r]) for r in rows], [float(times[i]) for i in sheet_idx],
+                                  max_width_px=spec.sheet_width)
+        for wtr in writers:
+            wtr.close()
+    except BaseException:
+        for wtr in writers:
+            wtr.abort()
+        raise
+    write_png(out / "contact_sheet.png", sheet_img)
+    if metric_rows:
+        from neuspike.atomic import replacing
+
+        with replacing(out / "metrics.csv") as tmp, open(tmp, "w", newline="") as fh:
+            wr = csv.DictWriter(fh, fieldnames=list(METRIC_COLUMNS))
+            wr.writeheader()
+            wr.writerows(metric_rows)
+        plot_metrics(out / "metrics.csv", out / "metrics.png")
+    per_method = {}
+    for m in methods:
+        scored = [r for r in metric_rows if r["method"] == m.name]
+        fl = [float(r["flicker_rmse"]) for r in scored if r["flicker_rmse"] != ""]
+        per_method[m.name] = {
+            "inputs": sorted(m.inputs),
+            "normalisation": m.last_normalisation,
+            "method_seconds": busy[m.name],
+            "method_frames_per_s": n / busy[m.name] if busy[m.name] > 0 else None,
+            "scored_frames": len(scored),
+            "mean_psnr_db": float(np.mean([float(r["psnr_db"]) for r in scored])) if scored else None,
+            "mean_ssim": float(np.mean([float(r["ssim"]) for r in scored])) if scored else None,
+            "mean_flicker_rmse": float(np.mean(fl)) if fl else None,
+        }
+    summary = {
+        "spec": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(spec).items()},
+        "recording": {"width": w, "height": h, "modalities": sorted(rec.modalities),
+                      "plane_rate_hz": rec.plane_rate_hz, "span_s": list(rec.span_s()), "gain": rec.gain,
+                      "gain_source": rec.gain_source, "folder": str(rec.folder)},
+        "frames": n, "fps": fps, "start_s": start, "end_s": end,
+        "ground_truth": truth.source if truth is not None else None,
+        "wall_seconds": wall, "wall_frames_per_s": n / wall if wall > 0 else None,
+        "real_time_factor": (end - start) / wall if wall > 0 else None,
+        "methods": per_method,
+    }
+    write_text(out / "video.json", json.dumps(summary, indent=2, default=str) + "\n")
+    return summary
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 ok, 2 error with one line on stderr)."""

@@ -129,6 +129,32 @@ def _partial(path: Path) -> Path:
     return path.with_name(f".{path.stem}.partial{path.suffix}")
 
 
+def mp4_complete(path: Path) -> bool:
+    """Whether ``path`` is a whole MPEG-4 file: its top-level boxes tile the file exactly and one is
+    the ``moov`` index (written last: a truncated file lacks it or ends inside a box)."""
+    try:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            at, kinds = 0, set()
+            while at < size:
+                fh.seek(at)
+                head = fh.read(16)
+                if len(head) < 8:
+                    return False
+                box, kind = int.from_bytes(head[:4], "big"), head[4:8]
+                if box == 1 and len(head) == 16:
+                    box = int.from_bytes(head[8:16], "big")
+                elif box == 0:
+                    box = size - at
+                if box < 8 or at + box > size:
+                    return False
+                kinds.add(kind)
+                at += box
+            return b"moov" in kinds
+    except OSError:
+        return False
+
+
 class Mp4Writer:
     """An MPEG-4 video (OpenCV's writer, ``mp4v``) written under a temporary name, published on close.
 
@@ -167,9 +193,24 @@ class Mp4Writer:
         self.frames += 1
 
     def close(self) -> Path:
+        """Finish the file, check that it reads back whole, and publish it under its name.
+
+        Raises
+        ------
+        SourceError
+            The file is not a whole MPEG-4 file (:func:`mp4_complete`; OpenCV ignores failed writes:
+            a full disk or a file size limit would otherwise publish a truncated, unplayable video).
+        """
         if self._writer is not None:
             self._writer.release()
             self._writer = None
+            if not mp4_complete(self.tmp):
+                size = self.tmp.stat().st_size if self.tmp.exists() else 0
+                self.tmp.unlink(missing_ok=True)
+                raise SourceError(
+                    f"{self.path}: the video was not written completely ({self.frames} frames, a file of "
+                    f"{size} bytes without its whole index): is the disk full or a file size limit set?"
+                )
             publish(self.tmp, self.path)
         return self.path
 
@@ -202,7 +243,8 @@ class FrameFolder:
         if self.png:
             import cv2
 
-            cv2.imwrite(str(self.tmp / f"{name}.png"), to_uint8(image))
+            if not cv2.imwrite(str(self.tmp / f"{name}.png"), to_uint8(image)):
+                raise SourceError(f"{self.path}: could not write {name}.png (is the disk full or a file size limit set?)")
         if self.npy:
             np.save(self.tmp / f"{name}.npy", np.asarray(image, dtype=np.float32))
         self.count += 1

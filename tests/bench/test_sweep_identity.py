@@ -17,6 +17,7 @@ from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable, create_many
 from neuspike.simulation.recording import SensorConfig
+from tests.bench.test_timing import Unavailable
 
 NAME = "zz-learned"
 BUILT: list[str] = []
@@ -128,24 +129,9 @@ def test_a_folder_written_before_the_identity_resumes_as_the_cpu_with_its_record
 # create_many: the one way every front end creates methods
 # ----------------------------------------------------------------------------------------------
 
-class Unavailable(Method):
-    inputs = frozenset({"events"})
-
-    def __init__(self, name=None, **params):
-        raise MethodUnavailable("weights not given (test)")
-
-    def _reconstruct(self, sample):
-        raise AssertionError("never called")
-
-
-class Broken(Method):
-    inputs = frozenset({"events"})
-
+class Broken(Unavailable):
     def __init__(self, name=None, **params):
         raise RuntimeError("cannot build (test)")
-
-    def _reconstruct(self, sample):
-        raise AssertionError("never called")
 
 
 @pytest.fixture
@@ -183,12 +169,21 @@ def test_a_device_no_method_runs_on_is_refused_naming_it():
         create_many(["tfi", "tfp-w32"], device="cuda:7")
 
 
-def test_a_device_this_machine_lacks_is_refused_for_learned_methods(learned):
+@pytest.mark.parametrize("kind", ["cuda", "mps", "xpu"])
+def test_a_device_this_machine_lacks_is_refused_for_learned_methods(learned, kind):
     import torch
 
-    missing = f"cuda:{torch.cuda.device_count() + 7}"
+    if kind == "cuda":
+        missing = f"cuda:{torch.cuda.device_count() + 7}"
+    elif kind == "mps" and not torch.backends.mps.is_available():
+        missing = "mps"
+    elif kind == "xpu" and not (hasattr(torch, "xpu") and torch.xpu.is_available()):
+        missing = "xpu"
+    else:
+        pytest.skip(f"this machine has a {kind} device")
     with pytest.raises(InputError, match=f"device: '{missing}' was asked for but this machine has"):
         create_many(["tfi", "e2vid"], device=missing)
+    assert BUILT == []
 
 
 def test_the_sweep_command_refuses_an_unusable_device_in_one_line(tmp_path, capsys):

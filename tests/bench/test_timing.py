@@ -241,3 +241,15 @@ def test_method_speed_rows_and_verdicts(test_methods, monkeypatch):
     assert by.loc["tt-unavailable", "status"] == "skipped"
     text = method_speed.markdown(frame, 2, 1, "cpu")
     assert "| tt-mean |" in text and "tt-unavailable (skipped): MethodUnavailable" in text
+
+
+@pytest.mark.parametrize("methods, device, cause", [
+    ("tfi,tfp-w32", "cuda:7", "device 'cuda:7': none of the methods (tfi, tfp-w32) runs on a torch device"),
+    ("tfi,tfi", "cpu", "--methods repeats a name"),
+])
+def test_timing_command_refuses_before_writing_anything(tmp_path, capsys, methods, device, cause):
+    code = timing.main(["--methods", methods, "--device", device, "--sizes", "32x24", "--results", "none",
+                        "--no-report", "--out", str(tmp_path / "t")])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert code == 2 and len(err) == 1 and cause in err[0], err
+    assert not (tmp_path / "t" / "config.json").exists()
