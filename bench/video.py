@@ -107,7 +107,7 @@ def _row(**fields: Any) -> dict[str, Any]:
 def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: VideoBenchSpec,
                    weights_dir: Path | None) -> dict[str, Any]:
     """Stream one method over ``times``; its row (an ``error`` row when it fails)."""
-    from neuspike.methods import create, entry
+    from neuspike.methods import create_many, entry
     from neuspike.video import stream_methods
     from neuspike.video.truth import FlickerMeter, score_frame
 
@@ -115,7 +115,7 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
     _apply_threads(spec)
     try:
         inputs = "+".join(sorted(entry(name).inputs))
-        method = create(name, weights_dir=weights_dir)
+        method = create_many([name], weights_dir=weights_dir, skip_unavailable=False)[name].method
         busy, psnrs, ssims, flicks, steps = 0.0, [], [], [], []
         meter = FlickerMeter()
         for sample, images, seconds in stream_methods([method], rec, times, event_history_s=spec.event_history_s):
@@ -155,7 +155,7 @@ def _apply_threads(spec: VideoBenchSpec) -> None:
 
 def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder: Path) -> list[dict[str, Any]]:
     """The ``read-only`` stream and TFP through per-frame :func:`load_sample` calls."""
-    from neuspike.methods import create
+    from neuspike.methods import create_many
     from neuspike.recordings import load_sample
     from neuspike.video import stream_samples
 
@@ -169,7 +169,7 @@ def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder
                          method_s=read_s, frames_per_s=n / read_s, real_time_factor=n / read_s / spec.fps,
                          threads=_threads(), error=""))
     sub = times[np.linspace(0, len(times) - 1, min(spec.single_frame_frames, len(times))).round().astype(int)]
-    tfp = create("tfp")
+    tfp = create_many(["tfp"])["tfp"].method
     t0 = time.perf_counter()
     for t in sub:
         tfp.reconstruct(load_sample(spikes=folder / "spikes.dat", at_s=float(t)))

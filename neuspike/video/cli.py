@@ -315,6 +315,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
     import numpy as np
 
     from neuspike.atomic import write_text
+    from neuspike.jsonio import portable_path
     from neuspike.video.stream import stream_methods
     from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, plot_metrics, score_frame
     from neuspike.video.writers import (
@@ -418,10 +419,11 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
             "mean_flicker_rmse": float(np.mean(fl)) if fl else None,
         }
     summary = {
-        "spec": {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(spec).items()},
+        "spec": {k: (portable_path(v) if isinstance(v, Path) else v) for k, v in asdict(spec).items()},
         "recording": {"width": w, "height": h, "modalities": sorted(rec.modalities),
                       "plane_rate_hz": rec.plane_rate_hz, "span_s": list(rec.span_s()), "gain": rec.gain,
-                      "gain_source": rec.gain_source, "folder": str(rec.folder)},
+                      "gain_source": rec.gain_source,
+                      "folder": portable_path(rec.folder) if rec.folder is not None else None},
         "frames": n, "fps": fps, "start_s": start, "end_s": end,
         "ground_truth": truth.source if truth is not None else None,
         "wall_seconds": wall, "wall_frames_per_s": n / wall if wall > 0 else None,

@@ -219,6 +219,8 @@ def test_command_writes_videos_frames_and_metrics(tmp_path, rng):
     assert not list(out.glob(".*partial*"))
     summary = json.loads((out / "video.json").read_text())
     assert summary["frames"] == 20 and summary["ground_truth"] == "scene"
+    # the record names no absolute folder of this machine (the command got absolute paths)
+    assert str(tmp_path) not in (out / "video.json").read_text()
     cap = cv2.VideoCapture(str(out / "compare.mp4"))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 20 and int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) == 3 * 48 + 8
     # the saved frames are the streamed frames
