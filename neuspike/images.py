@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from neuspike.atomic import write_bytes
@@ -44,8 +43,18 @@ def to_uint8(image01: np.ndarray, *, clip: bool) -> np.ndarray:
 
 
 def encode_png(image01: np.ndarray, *, clip: bool) -> bytes:
-    """The 8-bit greyscale PNG of a [0, 1] image (:func:`to_uint8`)."""
-    ok, buf = cv2.imencode(".png", to_uint8(image01, clip=clip))
+    """The 8-bit greyscale PNG of a [0, 1] image (:func:`to_uint8`), or of a uint8 (H, W) image as it
+    is (a picture already composed in 8 bits, e.g. a labelled contact sheet; ``clip`` is moot)."""
+    image = np.asarray(image01)
+    if image.dtype == np.uint8:
+        if image.ndim != 2:
+            raise InputError(f"image: expected a 2-D image (H, W), got shape {image.shape}")
+        image8 = image
+    else:
+        image8 = to_uint8(image, clip=clip)
+    import cv2  # here, so that importing this module stays cheap for the commands' --help
+
+    ok, buf = cv2.imencode(".png", image8)
     if not ok:
         raise NeuSpikeError("could not encode the image as PNG")
     return buf.tobytes()

@@ -315,11 +315,12 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
     import numpy as np
 
     from neuspike.atomic import write_text
+    from neuspike.images import to_uint8, write_png
     from neuspike.jsonio import portable_path
     from neuspike.video.stream import stream_methods
     from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, plot_metrics, score_frame
     from neuspike.video.writers import (
-        LABEL_BAND_PX, FrameFolder, Mp4Writer, contact_sheet, label_image, tile_row, to_uint8, write_png,
+        LABEL_BAND_PX, FrameFolder, Mp4Writer, contact_sheet, label_image, tile_row,
     )
 
     history = _history(spec)
@@ -359,7 +360,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
             for name in names:
                 img = images[name]
                 busy[name] += seconds[name]
-                img8 = to_uint8(img)
+                img8 = to_uint8(img, clip=True)
                 videos[name].write(img8)
                 if name in folders:
                     folders[name].write(img)
@@ -378,7 +379,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
                     sheet[name].append(img)
             if truth is not None:
                 gimg = gt[1] if gt is not None else np.zeros((h, w), np.float32)
-                tiles.append(label_image(to_uint8(gimg), "ground truth" if gt is not None else "(no ground truth)"))
+                tiles.append(label_image(to_uint8(gimg, clip=True), "ground truth" if gt is not None else "(no ground truth)"))
                 if k in sheet_idx:
                     sheet["ground truth"].append(gimg)
             compare.write(tile_row(tiles))
@@ -395,7 +396,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
         for wtr in writers:
             wtr.abort()
         raise
-    write_png(out / "contact_sheet.png", sheet_img)
+    write_png(out / "contact_sheet.png", sheet_img, clip=False)
     if metric_rows:
         from neuspike.atomic import replacing
 

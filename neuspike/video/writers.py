@@ -5,7 +5,7 @@ with ``.`` and containing ``.partial``) and renamed to its final name only when 
 :meth:`Mp4Writer.close` and :meth:`FrameFolder.close` publish, :meth:`~Mp4Writer.abort` removes.
 A run that fails therefore leaves no file under a final name.
 
-Images are float (H, W) in [0, 1]; 8-bit conversion is ``round(clip(x, 0, 1) * 255)``.
+Images are float (H, W) in [0, 1]; 8-bit conversion is :func:`neuspike.images.to_uint8` with ``clip=True``.
 """
 
 from __future__ import annotations
@@ -18,15 +18,14 @@ from typing import Sequence
 
 import numpy as np
 
-from neuspike.atomic import publish, write_bytes
-from neuspike.errors import InputError, NeuSpikeError, SourceError
+from neuspike.atomic import publish
+from neuspike.errors import InputError, SourceError
+from neuspike.images import to_uint8
 
 __all__ = [
-    "to_uint8",
     "label_image",
     "tile_row",
     "contact_sheet",
-    "write_png",
     "Mp4Writer",
     "FrameFolder",
     "check_writable",
@@ -34,11 +33,6 @@ __all__ = [
 
 #: Height in pixels of the band above each tile that carries its name.
 LABEL_BAND_PX = 22
-
-
-def to_uint8(image: np.ndarray) -> np.ndarray:
-    """float (H, W) in [0, 1] -> uint8 (H, W): ``round(clip(x, 0, 1) * 255)``."""
-    return np.round(np.clip(np.asarray(image, dtype=np.float32), 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
 def label_image(image8: np.ndarray, text: str) -> np.ndarray:
@@ -100,7 +94,7 @@ def contact_sheet(rows: Sequence[tuple[str, Sequence[np.ndarray]]], times_s: Seq
             raise InputError(f"contact_sheet: row {name!r} has {len(images)} images for {cols} instants")
         tiles = []
         for c, img in enumerate(images):
-            small = cv2.resize(to_uint8(img), (tw, th), interpolation=cv2.INTER_AREA) if scale < 1 else to_uint8(img)
+            small = cv2.resize(to_uint8(img, clip=True), (tw, th), interpolation=cv2.INTER_AREA) if scale < 1 else to_uint8(img, clip=True)
             text = name if c == 0 else ""
             if r == 0:
                 text = f"{text}  t={1e3 * times_s[c]:.2f} ms" if text else f"t={1e3 * times_s[c]:.2f} ms"
@@ -113,16 +107,6 @@ def contact_sheet(rows: Sequence[tuple[str, Sequence[np.ndarray]]], times_s: Seq
             out.append(gap)
         out.append(line)
     return np.concatenate(out, axis=0)
-
-
-def write_png(path: str | os.PathLike, image8: np.ndarray) -> None:
-    """Write a uint8 image as PNG, atomically."""
-    import cv2
-
-    ok, buf = cv2.imencode(".png", image8)
-    if not ok:
-        raise NeuSpikeError(f"could not encode {path} as PNG")
-    write_bytes(path, buf.tobytes())
 
 
 def _partial(path: Path) -> Path:
@@ -243,7 +227,7 @@ class FrameFolder:
         if self.png:
             import cv2
 
-            if not cv2.imwrite(str(self.tmp / f"{name}.png"), to_uint8(image)):
+            if not cv2.imwrite(str(self.tmp / f"{name}.png"), to_uint8(image, clip=True)):
                 raise SourceError(f"{self.path}: could not write {name}.png (is the disk full or a file size limit set?)")
         if self.npy:
             np.save(self.tmp / f"{name}.npy", np.asarray(image, dtype=np.float32))

@@ -36,7 +36,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from neuspike.atomic import write_text
     from neuspike.metrics import no_reference
-    from neuspike.video.writers import label_image, tile_row, to_uint8, write_png
+    from neuspike.images import to_uint8, write_png
+    from neuspike.video.writers import label_image, tile_row
 
     out = Path(args.out)
     rows = []
@@ -51,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
             images = {m: np.load(Path(tmp) / f"{m}.npy") for m in METHODS}
         # one labelled row of the methods' images (the video contact sheet's tiles)
         write_png(out / f"realdata_{NAMES[rec.name]}.png",
-                  tile_row([label_image(to_uint8(images[m]), m) for m in METHODS]))
+                  tile_row([label_image(to_uint8(images[m], clip=True), m) for m in METHODS]), clip=False)
         rows += [{"recording": rec.name, "method": m,
                   **{k: round(float(v), 6) for k, v in no_reference(images[m]).items()}} for m in METHODS]
     frame = pd.DataFrame(rows)

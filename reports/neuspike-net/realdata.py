@@ -32,7 +32,8 @@ def main(argv: list[str] | None = None) -> int:
 
     from neuspike.atomic import write_text
     from neuspike.metrics import no_reference
-    from neuspike.video.writers import label_image, tile_row, to_uint8, write_png
+    from neuspike.images import to_uint8, write_png
+    from neuspike.video.writers import label_image, tile_row
 
     rec = Path(args.recording)
     out = HERE / "realdata"
@@ -50,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
         ms = float(line.rsplit(" ms;", 1)[0].rsplit(";", 1)[1])
         rows.append({"method": m, "recording": rec.name, "normalisation": norm, "ms": round(ms, 1),
                      **{k: round(float(v), 6) for k, v in no_reference(images[m]).items()}})
-    write_png(out / "contact_sheet.png", tile_row([label_image(to_uint8(images[m]), m) for m in METHODS]))
+    sheet = tile_row([label_image(to_uint8(images[m], clip=True), m) for m in METHODS])
+    write_png(out / "contact_sheet.png", sheet, clip=False)
     frame = pd.DataFrame(rows)
     write_text(out / "measures.csv", frame.to_csv(index=False, lineterminator="\n"))
     print(frame.to_string(index=False))

@@ -22,7 +22,7 @@ from neuspike.streams import EventStream, SpikeStream
 from neuspike.video import check_fps, frame_times, open_recording, reconstruct_video, stream_samples
 from neuspike.video.cli import main
 from neuspike.video.truth import FlickerMeter, ground_truth_for
-from neuspike.video.writers import to_uint8
+from neuspike.images import to_uint8
 
 H, W = 24, 32
 RATE = 20_000.0
@@ -229,7 +229,7 @@ def test_command_writes_videos_frames_and_metrics(tmp_path, rng):
     k = 7
     assert np.array_equal(np.load(out / "tfp-w32" / f"frame_{k:06d}.npy"), streamed[k][1])
     png = cv2.imread(str(out / "tfp-w32" / f"frame_{k:06d}.png"), cv2.IMREAD_UNCHANGED)
-    assert np.array_equal(png, to_uint8(streamed[k][1]))
+    assert np.array_equal(png, to_uint8(streamed[k][1], clip=True))
     import csv
 
     rows = list(csv.DictReader(open(out / "metrics.csv")))
