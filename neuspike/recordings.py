@@ -22,7 +22,7 @@ Events
     :data:`EVENT_HISTORY_S` (1 s) before the window start; earlier events are not loaded into the
     sample (:func:`load_sample`'s ``meta`` records how many were left out). HDF5 event files are read
     by range, other formats whole; either way with the checks of
-    :func:`neuspike.formats.events_io.read_events`.
+    :func:`neuspike.formats.event_readers.read_events`.
 
 Ground truth (for evaluation only; :func:`load_sample`)
     ``gt`` (a ``.png`` or ``.npy`` file) when given. Otherwise ``gt.npy`` (preferred: not quantised)

@@ -4,7 +4,7 @@
 ``height``, ``time_of(i)``, ``index(t_s)`` (the first event at or after ``t_s``), ``read(i0, i1)``
 and ``close()``. HDF5 files (the common and the PKU-Vidar-DVS layouts) are searched by bisection
 over the timestamps and sliced; text, ``.npz`` and AEDAT4 files have no index and are read once,
-whole, by :func:`neuspike.formats.events_io.read_events`.
+whole, by :func:`neuspike.formats.event_readers.read_events`.
 
 Every range read is validated by the same function as a whole-file read (:func:`read_events`): the
 same layouts are accepted, with the same checks (1-D arrays of one length, sorted finite
@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from neuspike.errors import FormatError
-from neuspike.formats.events_io import (
-    _H5_KEYS, _PKU_FIELDS, DAVIS346_SIZE, _events_from_arrays, _side, read_events,
+from neuspike.formats.event_readers import (
+    DAVIS346_SIZE, H5_KEYS, PKU_FIELDS, check_side, events_from_arrays, read_events,
 )
 from neuspike.streams import EventStream
 
@@ -82,13 +82,13 @@ class H5Events:
         path, node = self.path, self.file.get("events")
         declared = None
         if isinstance(node, h5py.Group):
-            missing = [k for k in _H5_KEYS if not isinstance(node.get(k), h5py.Dataset)]
+            missing = [k for k in H5_KEYS if not isinstance(node.get(k), h5py.Dataset)]
             if missing:
                 raise FormatError(f"{path}: the group 'events' lacks dataset(s) "
                                   f"{', '.join('events/' + k for k in missing)}")
             self.layout = "common"
-            self.xs, self.ys, self.ts, self.ps = (node[k] for k in _H5_KEYS)
-            shapes = {k: node[k].shape for k in _H5_KEYS}
+            self.xs, self.ys, self.ts, self.ps = (node[k] for k in H5_KEYS)
+            shapes = {k: node[k].shape for k in H5_KEYS}
             if any(len(s) != 1 for s in shapes.values()) or len({s[0] for s in shapes.values()}) != 1:
                 raise FormatError(f"{path}: expected events/xs, ys, ts, ps as 1-D arrays of one length, got "
                                   + ", ".join(f"{k} {s}" for k, s in shapes.items()))
@@ -97,15 +97,15 @@ class H5Events:
                 if res.size != 2:
                     raise FormatError(f"{path}: attribute sensor_resolution should be (height, width), "
                                       f"got {res.tolist()!r}")
-                declared = (_side(path, res[1], "sensor_resolution width"),
-                            _side(path, res[0], "sensor_resolution height"))
+                declared = (check_side(path, res[1], "sensor_resolution width"),
+                            check_side(path, res[0], "sensor_resolution height"))
             self.divisor = 1.0
             self.count = int(self.ts.shape[0])
         elif isinstance(node, h5py.Dataset) and node.dtype.names is not None:
-            missing = [k for k in _PKU_FIELDS if k not in node.dtype.names]
+            missing = [k for k in PKU_FIELDS if k not in node.dtype.names]
             if missing:
                 raise FormatError(f"{path}: dataset 'events' lacks field(s) {missing}; the PKU-Vidar-DVS layout "
-                                  f"has {', '.join(_PKU_FIELDS)}, found {list(node.dtype.names)}")
+                                  f"has {', '.join(PKU_FIELDS)}, found {list(node.dtype.names)}")
             if node.ndim != 1:
                 raise FormatError(f"{path}: expected the dataset 'events' to be 1-D, got shape {node.shape}")
             if node.dtype["timestamp"].kind not in "iuf":
@@ -117,7 +117,7 @@ class H5Events:
             self.count = int(node.shape[0])
         else:
             raise FormatError(f"{path}: neither the common HDF5 event layout (events/xs, ys, ts, ps) nor the "
-                              f"PKU-Vidar-DVS one (a compound dataset 'events' with {', '.join(_PKU_FIELDS)})")
+                              f"PKU-Vidar-DVS one (a compound dataset 'events' with {', '.join(PKU_FIELDS)})")
         if width is not None:
             self.width, self.height = int(width), int(height)
         elif declared is not None:
@@ -149,11 +149,11 @@ class H5Events:
                 self._seen.update(int(v) for v in np.unique(p[(p == 0) | (p == -1)]))
                 if {0, -1} <= self._seen:
                     raise FormatError(f"{self.path}: polarities mix the {{0, 1}} and the {{-1, +1}} conventions")
-                return _events_from_arrays(self.path, self.ts[i0:i1], self.xs[i0:i1], self.ys[i0:i1], p,
+                return events_from_arrays(self.path, self.ts[i0:i1], self.xs[i0:i1], self.ys[i0:i1], p,
                                            self.width, self.height, meta, polarity="01" if 0 in self._seen else "any")
             rec = self.node[i0:i1]
             t = rec["timestamp"].astype(np.float64) / self.divisor
-            return _events_from_arrays(self.path, t, rec["x"], rec["y"], rec["polarity"], self.width, self.height,
+            return events_from_arrays(self.path, t, rec["x"], rec["y"], rec["polarity"], self.width, self.height,
                                        meta, polarity="01")
         except FormatError as exc:
             raise FormatError(f"{exc} (counted from event {i0} of the file)") from None

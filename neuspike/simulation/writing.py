@@ -16,7 +16,7 @@ import numpy as np
 
 from neuspike.atomic import write_bytes, write_json, write_text
 from neuspike.conditions import EVENTS, SPIKES, Condition
-from neuspike.formats.events_io import EventsH5Writer, write_events_h5
+from neuspike.formats.event_writers import EventsH5Writer, write_events_h5
 from neuspike.formats.staging import staged_folder
 from neuspike.formats.vidar_dat import DatWriter, write_dat
 from neuspike.images import write_png

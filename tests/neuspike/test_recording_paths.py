@@ -119,8 +119,8 @@ def test_both_commands_refuse_a_bad_event_file_for_its_cause(tmp_path, capsys, c
 
 
 def test_a_range_read_gives_the_whole_reads_events(tmp_path):
-    """A good HDF5 file read by range (the stream) equals its whole read (events_io), 0/1 polarities included."""
-    from neuspike.formats.events_io import read_events
+    """A good HDF5 file read by range (the stream) equals its whole read (event_readers), 0/1 polarities included."""
+    from neuspike.formats.event_readers import read_events
 
     path = _common_h5(tmp_path / "e.h5", p=np.arange(N) % 2)
     whole = read_events(path)

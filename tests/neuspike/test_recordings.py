@@ -35,7 +35,7 @@ needs_dat = pytest.mark.skipif(
     reason="reader not yet available",
 )
 needs_events_io = pytest.mark.skipif(
-    not (_has("neuspike.formats.events_io", "read_events") and _has("neuspike.formats.events_io", "write_events_h5")),
+    not (_has("neuspike.formats.event_readers", "read_events") and _has("neuspike.formats.event_writers", "write_events_h5")),
     reason="reader not yet available",
 )
 
@@ -186,7 +186,7 @@ def test_rate_start_and_gain_stored_in_an_npz_are_used(tmp_path):
 @needs_npz_reader
 @needs_events_io
 def test_events_are_cut_to_the_window_plus_history(tmp_path):
-    from neuspike.formats.events_io import write_events_h5
+    from neuspike.formats.event_writers import write_events_h5
 
     folder = _simulated_folder(tmp_path, t=64)
     t = np.array([-2.0, -0.5, 0.0005, 0.0031, 0.00319, 0.0032, 0.01])

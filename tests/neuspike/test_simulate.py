@@ -117,7 +117,7 @@ def test_no_effects_is_deterministic_from_the_scene():
 
 
 def test_cli_writes_a_complete_recording(tmp_path, capsys):
-    from neuspike.formats.events_io import read_events
+    from neuspike.formats.event_readers import read_events
     from neuspike.formats.vidar_dat import read_dat
 
     out = tmp_path / "rec"

@@ -13,7 +13,8 @@ import pytest
 
 from neuspike import methods as registry
 from neuspike.errors import InputError
-from neuspike.formats.events_io import read_events, write_events_h5, write_events_npz
+from neuspike.formats.event_readers import read_events
+from neuspike.formats.event_writers import write_events_h5, write_events_npz
 from neuspike.formats.spike_npz import write_spike_npz
 from neuspike.formats.vidar_dat import write_dat
 from neuspike.methods import Method

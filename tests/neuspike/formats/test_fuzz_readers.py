@@ -69,11 +69,11 @@ def test_read_dat_plane_range_of_the_wrong_type_is_an_input_error(tmp_path):
 @pytest.mark.skipif(not HAVE_AEDAT, reason="the optional aedat package is not installed")
 def test_a_decoder_crash_is_contained_in_its_child_process():
     """Past the in-process checks, a file that aborts the decoder still gives a FormatError here."""
-    from neuspike.formats import events_io
+    from neuspike.formats import event_readers
 
     path = FIXTURES / "aedat4-abort-171.aedat4"  # once aborted the interpreter ("panic in a destructor")
     with pytest.raises(FormatError, match="not a readable AEDAT4 file"):
-        events_io._aedat4_decode(path, 0)
+        event_readers._aedat4_decode(path, 0)
 
 
 def test_fuzzed_meta_json_beside_a_recording_gives_typed_errors_or_samples(tmp_path):

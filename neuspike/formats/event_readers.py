@@ -1,4 +1,4 @@
-"""Event files: read and write the formats the field uses.
+"""Event files: the readers (:func:`read_events`) and the validation every event file goes through.
 
 Formats (:func:`read_events` picks one from the extension, or from the content when the extension
 says nothing):
@@ -36,8 +36,7 @@ and unknown polarity values raise :class:`FormatError` naming the first offendin
 files (corrupt archives, HDF5 objects, gzip streams, undecodable text) raise :class:`FormatError`
 naming the file, never the underlying library's exception; a sensor side above
 :data:`MAX_SENSOR_SIDE` or a dataset declaring more data than its stored bytes can hold is refused
-before anything is allocated. Nothing is sorted, clipped or dropped silently. All writers are atomic: they write a temporary
-file in the target folder and move it into place only when complete.
+before anything is allocated. Nothing is sorted, clipped or dropped silently. The writers are in :mod:`neuspike.formats.event_writers`.
 """
 
 from __future__ import annotations
@@ -55,20 +54,13 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish, replacing, temp_beside
 from neuspike.checks import check_positive_int
 from neuspike.errors import FormatError, InputError, NeuSpikeError, SourceError
 from neuspike.formats._npz import NpzArchive
 from neuspike.streams import P_DTYPE, T_DTYPE, XY_DTYPE, EventStream
 
-__all__ = [
-    "DAVIS346_SIZE",
-    "EventsH5Writer",
-    "read_events",
-    "write_events_h5",
-    "write_events_npz",
-    "write_events_txt",
-]
+__all__ = ["DAVIS346_SIZE", "H5_KEYS", "MAX_SENSOR_SIDE", "PKU_FIELDS", "check_side", "events_from_arrays",
+           "read_events"]
 
 #: Sensor size (width, height) assumed for PKU-Vidar-DVS files, which do not store it.
 DAVIS346_SIZE = (346, 260)
@@ -80,9 +72,9 @@ _MAX_EXPANSION = 1100
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _ZIP_MAGIC = b"PK\x03\x04"
 _AEDAT4_MAGIC = b"#!AER-DAT4.0"
-_H5_KEYS = ("xs", "ys", "ts", "ps")
+H5_KEYS = ("xs", "ys", "ts", "ps")
 _NPZ_KEYS = ("t_s", "x", "y", "p", "width", "height")
-_PKU_FIELDS = ("timestamp", "x", "y", "polarity")
+PKU_FIELDS = ("timestamp", "x", "y", "polarity")
 
 
 # --------------------------------------------------------------------------- validation
@@ -90,7 +82,7 @@ def _first_true(mask: np.ndarray) -> int:
     return int(np.argmax(mask))
 
 
-def _events_from_arrays(
+def events_from_arrays(
     path: Path, t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray,
     width: int, height: int, meta: dict[str, Any], *, polarity: str,
 ) -> EventStream:
@@ -157,7 +149,7 @@ def _events_from_arrays(
         raise FormatError(f"{path}: {exc}") from None
 
 
-def _side(path: Path, value: Any, what: str) -> int:
+def check_side(path: Path, value: Any, what: str) -> int:
     """A sensor side read from a file: a whole number in [1, MAX_SENSOR_SIDE]."""
     try:
         v = float(value)
@@ -221,7 +213,7 @@ def _read_h5_open(path: Path, f: Any, width: Any, height: Any) -> EventStream:
 
     node = f.get("events")
     if isinstance(node, h5py.Group):
-        missing = [k for k in _H5_KEYS if not isinstance(node.get(k), h5py.Dataset)]
+        missing = [k for k in H5_KEYS if not isinstance(node.get(k), h5py.Dataset)]
         if missing:
             raise FormatError(
                 f"{path}: the group 'events' lacks dataset(s) {', '.join('events/' + k for k in missing)}; "
@@ -234,19 +226,19 @@ def _read_h5_open(path: Path, f: Any, width: Any, height: Any) -> EventStream:
                 raise FormatError(
                     f"{path}: attribute sensor_resolution should be (height, width), got {res.tolist()!r}"
                 )
-            declared = (_side(path, res[1], "sensor_resolution width"),
-                        _side(path, res[0], "sensor_resolution height"))
+            declared = (check_side(path, res[1], "sensor_resolution width"),
+                        check_side(path, res[0], "sensor_resolution height"))
         w, h = _size(path, declared, width, height,
                      "no sensor_resolution attribute (height, width) in the file")
-        arrays = [_h5_array(path, node[k], f"events/{k}") for k in _H5_KEYS]
-        return _events_from_arrays(path, arrays[2], arrays[0], arrays[1], arrays[3], w, h,
+        arrays = [_h5_array(path, node[k], f"events/{k}") for k in H5_KEYS]
+        return events_from_arrays(path, arrays[2], arrays[0], arrays[1], arrays[3], w, h,
                                    {"source": str(path), "format": "hdf5"}, polarity="any")
     if isinstance(node, h5py.Dataset) and node.dtype.names is not None:
-        missing = [k for k in _PKU_FIELDS if k not in node.dtype.names]
+        missing = [k for k in PKU_FIELDS if k not in node.dtype.names]
         if missing:
             raise FormatError(
                 f"{path}: dataset 'events' lacks field(s) {missing}; the PKU-Vidar-DVS layout has "
-                f"{', '.join(_PKU_FIELDS)}, found {list(node.dtype.names)}"
+                f"{', '.join(PKU_FIELDS)}, found {list(node.dtype.names)}"
             )
         rec = _h5_array(path, node, "events")
         if rec.ndim != 1:
@@ -257,13 +249,13 @@ def _read_h5_open(path: Path, f: Any, width: Any, height: Any) -> EventStream:
             raise FormatError(f"{path}: expected numeric timestamps, got dtype {stamp.dtype}")
         t = stamp.astype(np.float64) / 1e6
         meta = {"source": str(path), "format": "pku-vidar-dvs-hdf5"}
-        stream = _events_from_arrays(path, t, rec["x"], rec["y"], rec["polarity"], w, h, meta, polarity="01")
+        stream = events_from_arrays(path, t, rec["x"], rec["y"], rec["polarity"], w, h, meta, polarity="01")
         stream.meta["t_first_s"] = float(stream.t_s[0]) if len(stream) else None
         return stream
     found = sorted(f.keys())
     raise FormatError(
         f"{path}: expected the group 'events' with datasets xs, ys, ts, ps (common layout) or a "
-        f"compound dataset 'events' with fields {', '.join(_PKU_FIELDS)} (PKU-Vidar-DVS); "
+        f"compound dataset 'events' with fields {', '.join(PKU_FIELDS)} (PKU-Vidar-DVS); "
         f"found {found}"
     )
 
@@ -286,7 +278,7 @@ def _read_txt_open(path: Path, width: Any, height: Any) -> EventStream:
         header = line.split()
         declared = None
         if len(header) == 2 and line.endswith("\n") and all(v.isascii() and v.isdigit() for v in header):
-            declared = (_side(path, header[0], "the header's width"), _side(path, header[1], "the header's height"))
+            declared = (check_side(path, header[0], "the header's width"), check_side(path, header[1], "the header's height"))
         if declared is None:
             raise FormatError(
                 f"{path}: the first line must be 'width height' (E2VID text format), got {line[:80]!r}"
@@ -306,7 +298,7 @@ def _read_txt_open(path: Path, width: Any, height: Any) -> EventStream:
         i = int(np.argmax(missing))
         raise FormatError(f"{path}: event {i} (line {i + 2}) does not have four numbers 't x y p'")
     cols = [table[c].to_numpy() if len(table) else np.zeros(0) for c in ("t", "x", "y", "p")]
-    return _events_from_arrays(path, cols[0], cols[1], cols[2], cols[3], w, h,
+    return events_from_arrays(path, cols[0], cols[1], cols[2], cols[3], w, h,
                                {"source": str(path), "format": "e2vid-txt"}, polarity="any")
 
 
@@ -323,10 +315,10 @@ def _read_npz(path: Path, width: Any, height: Any) -> EventStream:
         missing = [k for k in _NPZ_KEYS if k not in data.files]
         if missing:
             raise FormatError(f"{path}: missing array(s) {missing}; expected {', '.join(_NPZ_KEYS)}")
-        declared = (_side(path, _npz_number(data, "width"), "width"),
-                    _side(path, _npz_number(data, "height"), "height"))
+        declared = (check_side(path, _npz_number(data, "width"), "width"),
+                    check_side(path, _npz_number(data, "height"), "height"))
         w, h = _size(path, declared, width, height, "")
-        return _events_from_arrays(path, data["t_s"], data["x"], data["y"], data["p"], w, h,
+        return events_from_arrays(path, data["t_s"], data["x"], data["y"], data["p"], w, h,
                                    {"source": str(path), "format": "npz"}, polarity="pm1")
 
 
@@ -469,13 +461,13 @@ def _read_aedat4(path: Path, width: Any, height: Any) -> EventStream:
     info = streams[sid]
     declared = None
     if "sizeX" in info and "sizeY" in info:
-        declared = (_side(path, info["sizeX"], "the event stream's sizeX"),
-                    _side(path, info["sizeY"], "the event stream's sizeY"))
+        declared = (check_side(path, info["sizeX"], "the event stream's sizeX"),
+                    check_side(path, info["sizeY"], "the event stream's sizeY"))
     w, h = _size(path, declared, width, height, "the event stream states no sizeX/sizeY")
     ev = _aedat4_decode(path, sid)
     t = ev["t"].astype(np.float64) / 1e6
     meta = {"source": str(path), "format": "aedat4", "t_first_s": float(t[0]) if t.size else None}
-    return _events_from_arrays(path, t, ev["x"], ev["y"], ev["on"], w, h, meta, polarity="01")
+    return events_from_arrays(path, t, ev["x"], ev["y"], ev["on"], w, h, meta, polarity="01")
 
 
 def _aedat4_decode(path: Path, stream_id: int) -> np.ndarray:
@@ -548,205 +540,3 @@ def read_events(path: str | os.PathLike, *, width: int | None = None, height: in
     else:
         reader = _READERS.get(p.suffix.lower()) or _sniff(p)
     return reader(p, width, height)
-
-
-# --------------------------------------------------------------------------- writers
-def _check_stream(stream: Any, where: str) -> EventStream:
-    if not isinstance(stream, EventStream):
-        raise InputError(f"{where}: expected an EventStream, got {type(stream).__name__}")
-    return stream
-
-
-def _atomic(path: str | os.PathLike, write) -> Path:
-    """Run ``write(temp_path)`` then move the temporary file onto ``path``; no partial files."""
-    target = Path(path)
-    if not target.parent.is_dir():
-        raise SourceError(f"cannot write {target}: folder {target.parent} does not exist")
-    with replacing(target) as tmp:
-        write(Path(tmp))
-    return target
-
-
-def _h5_attrs(f, width: int, height: int, t: np.ndarray, num_pos: int, num_neg: int) -> None:
-    f.attrs["sensor_resolution"] = np.array([height, width], dtype=np.int64)
-    f.attrs["num_events"] = int(num_pos + num_neg)
-    f.attrs["num_pos"] = int(num_pos)
-    f.attrs["num_neg"] = int(num_neg)
-    t0 = float(t[0]) if t.size else 0.0
-    tk = float(t[-1]) if t.size else 0.0
-    f.attrs["t0"] = t0
-    f.attrs["tk"] = tk
-    f.attrs["duration"] = tk - t0
-
-
-def write_events_h5(path: str | os.PathLike, stream: EventStream) -> Path:
-    """Write events in the common HDF5 layout (atomic).
-
-    ``events/xs``, ``events/ys`` (uint16), ``events/ts`` (float64 s), ``events/ps`` (uint8,
-    {0, 1}), attribute ``sensor_resolution = (height, width)``.
-    """
-    stream = _check_stream(stream, "write_events_h5")
-
-    def write(tmp: Path) -> None:
-        import h5py
-
-        with h5py.File(tmp, "w") as f:
-            g = f.create_group("events")
-            g.create_dataset("xs", data=stream.x)
-            g.create_dataset("ys", data=stream.y)
-            g.create_dataset("ts", data=stream.t_s)
-            g.create_dataset("ps", data=(stream.p > 0).astype(np.uint8))
-            num_pos = int(np.count_nonzero(stream.p > 0))
-            _h5_attrs(f, stream.width, stream.height, stream.t_s, num_pos, len(stream) - num_pos)
-
-    return _atomic(path, write)
-
-
-def write_events_txt(path: str | os.PathLike, stream: EventStream) -> Path:
-    """Write events in the E2VID text format (atomic; gzip-compressed for a ``.gz`` name).
-
-    Timestamps are written with 17 significant digits, so a float64 time reads back exactly.
-    """
-    stream = _check_stream(stream, "write_events_txt")
-    import pandas as pd
-
-    target = Path(path)
-
-    def write(tmp: Path) -> None:
-        opener = gzip.open if target.suffix == ".gz" else open
-        with opener(tmp, "wt", newline="\n") as fh:
-            fh.write(f"{stream.width} {stream.height}\n")
-            table = pd.DataFrame({"t": stream.t_s, "x": stream.x, "y": stream.y,
-                                  "p": (stream.p > 0).astype(np.uint8)})
-            table.to_csv(fh, sep=" ", header=False, index=False, float_format="%.17g",
-                         lineterminator="\n")
-
-    return _atomic(target, write)
-
-
-def write_events_npz(path: str | os.PathLike, stream: EventStream) -> Path:
-    """Write events as ``.npz`` with arrays t_s, x, y, p, width, height (atomic, uncompressed)."""
-    stream = _check_stream(stream, "write_events_npz")
-
-    def write(tmp: Path) -> None:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, t_s=stream.t_s, x=stream.x, y=stream.y, p=stream.p,
-                     width=np.int64(stream.width), height=np.int64(stream.height))
-
-    return _atomic(path, write)
-
-
-class EventsH5Writer:
-    """Append event streams to a common-layout HDF5 file, for simulations too long for memory.
-
-    The file is written under a temporary name beside ``path`` and moved into place by
-    :meth:`close`; if the writer is discarded after an error (or used as a context manager that
-    exits with an exception) the temporary file is removed and nothing appears at ``path``.
-
-    Parameters
-    ----------
-    path : str or PathLike
-        Target file.
-    width, height : int
-        Sensor size; every appended stream must have it.
-    chunk_events : int
-        HDF5 chunk length of the resizable datasets.
-
-    Examples
-    --------
-    >>> with EventsH5Writer("events.h5", 400, 250) as out:   # doctest: +SKIP
-    ...     for frames, times in chunks:
-    ...         out.write(camera.capture(frames, times))
-    """
-
-    def __init__(self, path: str | os.PathLike, width: int, height: int, *, chunk_events: int = 1 << 16) -> None:
-        import h5py
-
-        self.path = Path(path)
-        self.width = check_positive_int("EventsH5Writer width", width)
-        self.height = check_positive_int("EventsH5Writer height", height)
-        chunk = check_positive_int("chunk_events", chunk_events)
-        if not self.path.parent.is_dir():
-            raise SourceError(f"cannot write {self.path}: folder {self.path.parent} does not exist")
-        fd, tmp = temp_beside(self.path)
-        os.close(fd)
-        self._tmp = Path(tmp)
-        self._file = h5py.File(self._tmp, "w")
-        g = self._file.create_group("events")
-        self._sets = {
-            name: g.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(chunk,))
-            for name, dtype in (("xs", XY_DTYPE), ("ys", XY_DTYPE), ("ts", T_DTYPE), ("ps", np.uint8))
-        }
-        self.count = 0
-        self._num_pos = 0
-        self._t_first: float | None = None
-        self._t_last: float | None = None
-
-    def write(self, stream: EventStream) -> None:
-        """Append ``stream``; its events must not precede those already written."""
-        if self._file is None:
-            raise InputError(f"EventsH5Writer({self.path}): write after close")
-        stream = _check_stream(stream, "EventsH5Writer.write")
-        if (stream.width, stream.height) != (self.width, self.height):
-            raise InputError(
-                f"EventsH5Writer.write: stream is {stream.width}x{stream.height}, the file is "
-                f"{self.width}x{self.height}"
-            )
-        n = len(stream)
-        if n == 0:
-            return
-        if self._t_last is not None and stream.t_s[0] < self._t_last:
-            raise InputError(
-                f"EventsH5Writer.write: the stream's first event at {stream.t_s[0]!r} s precedes the "
-                f"last written event at {self._t_last!r} s (event {self.count - 1})"
-            )
-        start = self.count
-        values = {"xs": stream.x, "ys": stream.y, "ts": stream.t_s, "ps": (stream.p > 0).astype(np.uint8)}
-        for name, ds in self._sets.items():
-            ds.resize((start + n,))
-            ds[start:] = values[name]
-        self.count = start + n
-        self._num_pos += int(np.count_nonzero(stream.p > 0))
-        if self._t_first is None:
-            self._t_first = float(stream.t_s[0])
-        self._t_last = float(stream.t_s[-1])
-
-    def close(self) -> Path:
-        """Finish the file and move it to ``path``."""
-        if self._file is None:
-            return self.path
-        try:
-            t = np.array([] if self._t_first is None else [self._t_first, self._t_last])
-            _h5_attrs(self._file, self.width, self.height, t, self._num_pos, self.count - self._num_pos)
-            self._file.close()
-            self._file = None
-            publish(self._tmp, self.path)
-        except BaseException:
-            self.abort()
-            raise
-        return self.path
-
-    def abort(self) -> None:
-        """Discard everything written; nothing appears at ``path``."""
-        if self._file is not None:
-            try:
-                self._file.close()
-            finally:
-                self._file = None
-        self._tmp.unlink(missing_ok=True)
-
-    def __enter__(self) -> "EventsH5Writer":
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
-    def __del__(self) -> None:  # an unclosed writer leaves no partial file behind
-        try:
-            if getattr(self, "_file", None) is not None:
-                self.abort()
-        except Exception:
-            pass

@@ -12,14 +12,9 @@ import numpy as np
 import pytest
 
 from neuspike.errors import FormatError, InputError, SourceError
-from neuspike.formats import events_io
-from neuspike.formats.events_io import (
-    EventsH5Writer,
-    read_events,
-    write_events_h5,
-    write_events_npz,
-    write_events_txt,
-)
+from neuspike.formats import event_writers
+from neuspike.formats.event_readers import read_events
+from neuspike.formats.event_writers import EventsH5Writer, write_events_h5, write_events_npz, write_events_txt
 from neuspike.streams import EventStream
 from tests.shared_data import SHARED
 
@@ -252,7 +247,7 @@ def test_failed_write_leaves_no_partial_file(tmp_path, monkeypatch):
     def broken(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(events_io.np, "savez", broken)
+    monkeypatch.setattr(event_writers.np, "savez", broken)
     with pytest.raises(OSError, match="disk full"):
         write_events_npz(tmp_path / "e.npz", sample_stream(n=10))
     import pandas as pd
