@@ -107,7 +107,7 @@ class E2VID(FireNet):
     """``e2vid``: :class:`E2VIDModule` on normalised 5-bin voxel grids, FireNet's windows (module docstring).
 
     Parameters are FireNet's (``normalize``, ``events_per_pixel``, ``max_windows``) and those of every
-    :class:`~neuspike.learned.LearnedMethod`; the weights are our own safetensors.
+    :class:`~neuspike.methods.learned.LearnedMethod`; the weights are our own safetensors.
     """
 
     def build_module(self) -> nn.Module:

@@ -49,8 +49,8 @@ import math
 
 import numpy as np
 
-from neuspike.normalisation import ROBUST, ROBUST_PERCENTILE
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.methods.normalisation import ROBUST, ROBUST_PERCENTILE
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample

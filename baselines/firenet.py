@@ -30,10 +30,10 @@ a :class:`~neuspike.errors.FormatError` naming the offending keys.
 
 The weights come from the user: a folder passed as ``weights_dir`` (the commands' ``--weights``,
 or their ``NEUSPIKE_WEIGHTS`` variable), declared in the registry entry (its :class:`~neuspike.methods.WeightsConfig`, sub-folder
-``firenet``) and resolved by :func:`neuspike.weights.resolve_weights`: the file is looked up as
+``firenet``) and resolved by :func:`neuspike.methods.weights.resolve_weights`: the file is looked up as
 ``<dir>/firenet/<file>`` and then ``<dir>/<file>``, so either the weights root or the FireNet folder itself may be named. When no
 folder is given or the file is not there, constructing the method raises
-:class:`~neuspike.weights.WeightsNotFound` (a :class:`~neuspike.methods.MethodUnavailable`) naming
+:class:`~neuspike.methods.weights.WeightsNotFound` (a :class:`~neuspike.methods.MethodUnavailable`) naming
 every path tried; the harness records the reason and skips the method.
 
 Event windows. The network is recurrent and needs several windows of warm-up. A reconstruction
@@ -55,7 +55,7 @@ their estimate is also centred on it.
 Output: the readout clamped to [0, 1] (label ``"clamp"``), as FireNet's authors read it; no other
 normalisation.
 
-Precision follows the shared rule of :mod:`neuspike.learned`: ``"auto"`` (default) picks bfloat16
+Precision follows the shared rule of :mod:`neuspike.methods.learned`: ``"auto"`` (default) picks bfloat16
 where the device computes it natively and float32 elsewhere (emulated bfloat16 is slower than
 float32); the choice is recorded in ``params["precision"]``. In bfloat16 the convolutions run under
 autocast while the recurrent states and their update stay float32. The cost in accuracy is
@@ -79,15 +79,15 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
-from neuspike.learned import CLAMP, LearnedMethod
+from neuspike.methods.learned import CLAMP, LearnedMethod
 from neuspike.methods import WeightsConfig
 from neuspike.nn import ConvGRU, ResidualBlock
-from neuspike.representations import event_windows, voxel_grid
+from neuspike.methods.representations import event_windows, voxel_grid
 from neuspike.sample import Sample
 from neuspike.streams import EventStream
-from neuspike.weights import load_state_strict, load_torch_state
+from neuspike.methods.weights import load_state_strict, load_torch_state
 
 __all__ = [
     "NUM_BINS",
@@ -241,12 +241,12 @@ class FireNet(LearnedMethod):
     max_windows : int
         Most recent windows used for warm-up and output (default 24).
     weights_file, weights_dir, device, precision
-        As for every :class:`~neuspike.learned.LearnedMethod`; ``weights_file`` is
+        As for every :class:`~neuspike.methods.learned.LearnedMethod`; ``weights_file`` is
         ``"firenet.pt"`` or ``"firenet_plus.pt"`` (published, ``.pt``).
 
     Raises
     ------
-    neuspike.weights.WeightsNotFound
+    neuspike.methods.weights.WeightsNotFound
         When the weights cannot be found.
     """
 

@@ -50,7 +50,7 @@ and are not used, as for the event-only methods. ``theta`` is the method's ``thr
 else the sample's ``event_threshold``, else 0.2 (:func:`baselines.event_integration.resolve_threshold`).
 
 Output: ``exp(L)`` is a rate in spikes per plane. With the stream's gain known it is divided by the
-gain and saturates at 1 (label ``"gain"``, as :func:`neuspike.normalisation.rate_to_image`);
+gain and saturates at 1 (label ``"gain"``, as :func:`neuspike.methods.normalisation.rate_to_image`);
 computed as ``r * exp(min(h, log(gain / r)))`` (``h`` the events' term, the cap only where the
 pixel saturates anyway), so no overflow can occur and with no events the result is exactly the
 spike estimate's image. Without a gain, the log image is divided by its 99th percentile in the log
@@ -64,11 +64,11 @@ import math
 import numpy as np
 
 from baselines.event_integration import highpass_events, log_to_image, resolve_threshold
-from neuspike.normalisation import rate_to_image
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.methods.normalisation import rate_to_image
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
 from neuspike.methods import Method
-from neuspike.representations import spike_count
+from neuspike.methods.representations import spike_count
 from neuspike.sample import Sample
 from neuspike.streams import EventStream
 

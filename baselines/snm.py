@@ -43,7 +43,7 @@ the steady state exactly once converged and is unbiased from a cold start, for a
 ``q``: it is a normalised weighted mean of the refined current. Because the refined current
 conserves charge, a perfectly periodic spike train of period ``P`` gives ``x = 1 / P`` on every
 plane and the read-out ``1 / P`` exactly. The rate becomes an image through
-:func:`neuspike.normalisation.rate_to_image`: divided by the stream's gain when known (radiance),
+:func:`neuspike.methods.normalisation.rate_to_image`: divided by the stream's gain when known (radiance),
 the robust 99th-percentile scale when not (real recordings).
 
 Speed
@@ -120,11 +120,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuspike.normalisation import rate_to_image
-from neuspike.checks import check_int, check_nonnegative, check_positive
+from neuspike.methods.normalisation import rate_to_image
+from neuspike.utils.checks import check_int, check_nonnegative, check_positive
 from neuspike.errors import InputError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, resolve_backend
+from neuspike.utils.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 __all__ = [

@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from neuspike.checks import check_spike_window
-from neuspike.normalisation import rate_to_image
+from neuspike.utils.checks import check_spike_window
+from neuspike.methods.normalisation import rate_to_image
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample

@@ -4,7 +4,7 @@ The estimate of a pixel's rate (spikes per plane) is its spike count in a window
 the number of planes in that window; the radiance is rate / gain, where the gain is the expected
 number of spikes per plane per unit radiance (``L / threshold`` for simulated data). When the gain is
 unknown (real recordings) the rate goes through the robust normalisation of
-:mod:`neuspike.normalisation` instead, and the method says so in its normalisation label.
+:mod:`neuspike.methods.normalisation` instead, and the method says so in its normalisation label.
 
 Which planes
 ------------
@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_int, check_positive_int, check_spike_window
+from neuspike.utils.checks import check_int, check_positive_int, check_spike_window
 from neuspike.errors import InputError
-from neuspike.normalisation import rate_to_image
-from neuspike.representations import spike_count
+from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.representations import spike_count
 from neuspike.methods import Method
 from neuspike.sample import Sample
 

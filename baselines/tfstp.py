@@ -66,11 +66,11 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.normalisation import rate_to_image
-from neuspike.checks import check_positive, check_spike_window
+from neuspike.methods.normalisation import rate_to_image
+from neuspike.utils.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
-from neuspike.parallel import KERNEL_LOCK, resolve_backend
+from neuspike.utils.parallel import KERNEL_LOCK, resolve_backend
 from neuspike.sample import Sample
 
 U0 = 0.15

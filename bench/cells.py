@@ -50,8 +50,8 @@ from bench.grid import Cell
 from bench.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
 from neuspike.errors import InputError
-from neuspike.jsonio import canonical_json
-from neuspike.parallel import set_threads
+from neuspike.utils.jsonio import canonical_json
+from neuspike.utils.parallel import set_threads
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
 from neuspike.simulation.cache import RecordingCache
 from neuspike.simulation.cell import simulate_recording

@@ -29,7 +29,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Callable, Iterable, Iterator
 
-from neuspike.checks import check_positive_int
+from neuspike.utils.checks import check_positive_int
 from neuspike.errors import InputError
 
 EXECUTORS = ("local", "dask")

@@ -31,7 +31,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.table import Table  # noqa: E402
 
-from neuspike.atomic import write_with  # noqa: E402
+from neuspike.utils.atomic import write_with  # noqa: E402
 from bench.results import tfp_windows  # noqa: E402
 from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values, held_conditions,  # noqa: E402
                           method_families, method_order)

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Any, Iterable, Sequence
 
-from neuspike import checks
+from neuspike.utils import checks
 from neuspike.conditions import EVENT_PRESETS, NOISE_LEVELS, Condition, Effect, effect, merge_effects
 from neuspike.errors import InputError
 from neuspike.scenes import SceneSpec

@@ -57,9 +57,9 @@ from bench.executors import DaskExecutor, make_executor
 from bench.grid import Grid
 from bench.provenance import collect, finish, now_iso
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
-from neuspike.atomic import write_json, write_text
+from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError
-from neuspike.jsonio import canonical_json, portable_path, stable_hash
+from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
@@ -414,7 +414,7 @@ def preflight(spec: SweepSpec) -> None:
         One message naming the scene and the problem.
     """
     from neuspike.metrics import SSIM_WINDOW_SIDE
-    from neuspike.resources import check_memory
+    from neuspike.utils.resources import check_memory
     from neuspike.scenes import make_scene
     from neuspike.simulation.budget import window_budget
 

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 
-from neuspike.atomic import write_bytes, write_json, write_text
+from neuspike.utils.atomic import write_bytes, write_json, write_text
 from neuspike.errors import InputError
 
 __all__ = ["merge_sweeps", "main"]

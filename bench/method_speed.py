@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import numpy as np
 
 from neuspike.errors import InputError
-from neuspike.parallel import set_threads
+from neuspike.utils.parallel import set_threads
 
 WIDTH, HEIGHT = 400, 250
 REFERENCE_PLANES = 41
@@ -378,8 +378,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from bench import tables as tb
     from bench import timer
     from bench.provenance import machine
-    from neuspike.atomic import write_text
-    from neuspike.weights import weights_dir_from_env
+    from neuspike.utils.atomic import write_text
+    from neuspike.methods.weights import weights_dir_from_env
 
     try:
         if args.out:

@@ -21,7 +21,7 @@ from importlib import metadata as _metadata
 from pathlib import Path
 from typing import Any
 
-from neuspike.jsonio import portable_path
+from neuspike.utils.jsonio import portable_path
 
 #: Distributions whose versions are recorded (absent ones are recorded as ``None``).
 PACKAGES = (

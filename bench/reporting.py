@@ -50,11 +50,11 @@ import pandas as pd
 
 from bench import figures as figs
 from bench import tables as tb
-from neuspike.atomic import write_text
-from neuspike.images import write_png
+from neuspike.utils.atomic import write_text
+from neuspike.formats.images import write_png
 from bench.results import tfp_windows
 from bench.claims import claims_markdown, evaluate_claims
-from neuspike.atomic import replacing
+from neuspike.utils.atomic import replacing
 
 #: Resolution of the reconstruction grids' PNGs (each cell about 220 pixels wide).
 GRID_DPI = 100

@@ -48,7 +48,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from neuspike.atomic import write_text
+from neuspike.utils.atomic import write_text
 
 COLUMNS: tuple[str, ...] = (
     "cell", "scene", "kind", "image", "width", "height", "planes",

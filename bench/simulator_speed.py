@@ -35,7 +35,7 @@ import numpy as np
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.scenes import SceneSpec
-from neuspike.parallel import NUMBA_AVAILABLE
+from neuspike.utils.parallel import NUMBA_AVAILABLE
 
 FRAME_RATE_HZ = 22_500.0
 PX_PER_FRAME = 2.0

@@ -124,7 +124,7 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
     """Build the :class:`SweepSpec` of a command line."""
     from bench.harness import SweepSpec
     from neuspike.simulation.recording import SensorConfig
-    from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
+    from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
     weights = weights_dir_from_env(args.weights)
     if weights is not None and not weights.is_dir():

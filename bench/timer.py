@@ -21,10 +21,10 @@ import pandas as pd
 
 from bench import grid as grids
 from bench import tables as tb
-from neuspike.checks import check_int
+from neuspike.utils.checks import check_int
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
-from neuspike.parallel import set_threads
+from neuspike.utils.parallel import set_threads
 from neuspike.sample import Sample
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS, SensorConfig

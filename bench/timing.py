@@ -122,12 +122,12 @@ def run(args: argparse.Namespace) -> Path:
 
     from bench import tables as tb
     from bench.timer import LIGHT, MOTION, PLANES, check_count, join_accuracy, measure, method_names, sweep_resolution
-    from neuspike.parallel import set_threads
-    from neuspike.weights import WEIGHTS_ENV, weights_dir_from_env
+    from neuspike.utils.parallel import set_threads
+    from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
-    from neuspike.atomic import write_json, write_text
+    from neuspike.utils.atomic import write_json, write_text
     from bench.provenance import command_line, machine, now_iso, package_versions, source_state
-    from neuspike.jsonio import portable_path
+    from neuspike.utils.jsonio import portable_path
     from bench.reporting import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)

@@ -19,7 +19,7 @@ of sensor time; per method the benchmark records
 Reference rows, measured in the same run: ``read-only spikes`` and ``read-only events`` (the stream
 alone: reading spikes by plane range or events by time range and cutting each frame's sample, no
 method; a method reads only the modalities it needs) and
-``tfp (single-frame calls)`` (TFP through :func:`neuspike.recordings.load_sample` once per frame,
+``tfp (single-frame calls)`` (TFP through :func:`neuspike.formats.samples.load_sample` once per frame,
 as ``python -m neuspike.reconstruct`` would: what streaming with shared windows saves).
 
 Size of the run: the issue's standard is a 1 s recording (``--full``: 20,000 planes, 1,000 frames per
@@ -50,7 +50,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from neuspike.errors import InputError, NeuSpikeError
-from neuspike.parallel import set_threads
+from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
            "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "error")
@@ -81,7 +81,7 @@ class VideoBenchSpec:
 def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
     """Write the standard recording into ``folder`` (reused when its ``meta.json`` matches)."""
     from neuspike.conditions import Condition
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
     from neuspike.simulation.writing import write_sequence
 
@@ -156,7 +156,7 @@ def _apply_threads(spec: VideoBenchSpec) -> None:
 def measure_references(rec: Any, times: np.ndarray, spec: VideoBenchSpec, folder: Path) -> list[dict[str, Any]]:
     """The ``read-only`` stream and TFP through per-frame :func:`load_sample` calls."""
     from neuspike.methods import create_many
-    from neuspike.recordings import load_sample
+    from neuspike.formats.samples import load_sample
     from neuspike.video import stream_samples
 
     _apply_threads(spec)
@@ -188,7 +188,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     import torch
 
     from bench.provenance import collect, finish, now_iso
-    from neuspike.atomic import write_text
+    from neuspike.utils.atomic import write_text
     from neuspike.methods import available
     from neuspike.video import frame_times, open_recording
     from neuspike.video.truth import ground_truth_for
@@ -231,7 +231,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
             if bar is not None:
                 bar.close()
     frame = pd.DataFrame(rows, columns=list(COLUMNS))
-    from neuspike.atomic import replacing
+    from neuspike.utils.atomic import replacing
 
     with replacing(out / "results.csv") as tmp_csv:
         frame.to_csv(tmp_csv, index=False, float_format="%.6g")
@@ -297,7 +297,7 @@ def plot(csv_path: Path, png_path: Path) -> Path:
     import matplotlib.pyplot as plt
     import pandas as pd
 
-    from neuspike.atomic import replacing
+    from neuspike.utils.atomic import replacing
 
     frame = pd.read_csv(csv_path)
     ok = frame[(frame["status"] == "ok") & frame["mean_psnr_db"].notna()]
@@ -354,7 +354,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.plot_only:
             plot(args.out / "results.csv", args.out / "accuracy_vs_speed.png")
             return 0
-        from neuspike.weights import weights_dir_from_env
+        from neuspike.methods.weights import weights_dir_from_env
 
         if args.threads is not None and args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")

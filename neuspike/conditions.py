@@ -33,7 +33,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from neuspike.checks import check_int
+from neuspike.utils.checks import check_int
 from neuspike.errors import InputError
 
 SPIKES = "spikes"

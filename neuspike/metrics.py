@@ -48,7 +48,7 @@ import cv2
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from neuspike.checks import check_positive
+from neuspike.utils.checks import check_positive
 from neuspike.errors import InputError
 
 #: The SSIM settings, pinned (EVREAL's): passed verbatim to ``skimage.metrics.structural_similarity``.

@@ -6,7 +6,7 @@ for each method, prints the normalisation each method applied and, with a ground
 SSIM (plus their affine-aligned variants) with the pinned settings; without one, the no-reference
 measures. The flags are parsed into a frozen :class:`ReconstructSpec` and :func:`run` does the work.
 How the recording becomes a sample (key instant, windows, gain, size) is documented in
-:mod:`neuspike.recordings`.
+:mod:`neuspike.formats.samples`.
 
 Errors (an unknown method, an input a method needs but was not given, a file that cannot be read,
 weights that are missing) print one line to stderr and exit with status 2; nothing is written for
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
-from neuspike.cli import WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
+from neuspike.utils.cli import WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
 from neuspike.errors import InputError, NeuSpikeError
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -164,7 +164,7 @@ def _warn_entry_point_problems() -> None:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    from neuspike.atomic import write_bytes
+    from neuspike.utils.atomic import write_bytes
 
     write_bytes(path, data)
 
@@ -180,7 +180,7 @@ def write_outputs(out: Path, name: str, image: np.ndarray) -> tuple[Path, Path]:
 
     import numpy as np
 
-    from neuspike.images import encode_png
+    from neuspike.formats.images import encode_png
 
     out.mkdir(parents=True, exist_ok=True)
     png = encode_png(image, clip=False)
@@ -227,7 +227,7 @@ def run(spec: ReconstructSpec, stream: TextIO | None = None) -> list[MethodResul
         Any failed check (nothing is written when the checks before reconstruction fail).
     """
     from neuspike.metrics import describe_metrics, evaluate, no_reference
-    from neuspike.recordings import describe_sample, load_sample
+    from neuspike.formats.samples import describe_sample, load_sample
 
     stream = stream if stream is not None else sys.stdout
     if not spec.methods:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_nonnegative, check_positive, check_positive_int
+from neuspike.utils.checks import check_nonnegative, check_positive, check_positive_int
 from neuspike.errors import InputError
 
 T_DTYPE = np.float64

@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_positive_int
+from neuspike.utils.checks import check_positive_int
 from neuspike.errors import FormatError, InputError, NeuSpikeError, SourceError
 from neuspike.formats._npz import NpzArchive
 from neuspike.streams import P_DTYPE, T_DTYPE, XY_DTYPE, EventStream

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish, replacing, temp_beside
-from neuspike.checks import check_positive_int
+from neuspike.utils.atomic import publish, replacing, temp_beside
+from neuspike.utils.checks import check_positive_int
 from neuspike.errors import InputError, SourceError
 from neuspike.streams import T_DTYPE, XY_DTYPE, EventStream
 

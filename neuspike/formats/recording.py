@@ -1,7 +1,7 @@
 """Open a recording (files or a simulated folder) once: its metadata, and its data read by range.
 
-:func:`open_recording` is the one opener of recordings: :func:`neuspike.recordings.stream_samples`
-cuts samples from what it returns, and :func:`neuspike.recordings.load_sample` is one such cut. The
+:func:`open_recording` is the one opener of recordings: :func:`neuspike.formats.samples.stream_samples`
+cuts samples from what it returns, and :func:`neuspike.formats.samples.load_sample` is one such cut. The
 rules it applies, in order of precedence:
 
 Sensor metadata
@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 

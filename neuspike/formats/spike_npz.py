@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import write_with
-from neuspike.checks import check_positive
+from neuspike.utils.atomic import write_with
+from neuspike.utils.checks import check_positive
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats._npz import NpzArchive
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream

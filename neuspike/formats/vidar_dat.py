@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.atomic import publish, temp_beside
-from neuspike.checks import check_int, check_positive, check_positive_int
+from neuspike.utils.atomic import publish, temp_beside
+from neuspike.utils.checks import check_int, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 

@@ -14,13 +14,13 @@ import torch
 from torch import nn
 
 from neuspike.errors import FormatError, InputError
-from neuspike.learned import LearnedMethod
+from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
 from neuspike.nets.network import NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
                                            spike_gain, spike_representation)
 from neuspike.sample import Sample
-from neuspike.weights import read_card
+from neuspike.methods.weights import read_card
 
 __all__ = ["ARCHITECTURE_PARAMS", "NeuSpikeNetMethod"]
 
@@ -59,7 +59,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``w`` of the input-level skip (1 on simulated data; the paper uses the maximum of the event
         integration on real data).
     **learned
-        :class:`~neuspike.learned.LearnedMethod`'s arguments (weights, device, precision).
+        :class:`~neuspike.methods.learned.LearnedMethod`'s arguments (weights, device, precision).
     """
 
     inputs = frozenset({"spikes", "events"})

@@ -14,7 +14,7 @@ T_spike
     window counts as a spike one window length away.
 T_event
     ``"voxel"``: the E2VID voxel grid of the window's events, 32 bins, non-zero entries normalised to
-    mean 0 / std 1 (:func:`neuspike.representations.voxel_grid`).
+    mean 0 / std 1 (:func:`neuspike.methods.representations.voxel_grid`).
     ``"contrast"``: signed event counts in 32 equal time bins times the contrast threshold: the
     log-intensity change of each pixel in each bin (no normalisation, so its scale is physical).
 
@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.errors import InputError
-from neuspike.representations import voxel_grid
+from neuspike.methods.representations import voxel_grid
 from neuspike.sample import Sample
 
 __all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "SPIKE_REPRESENTATIONS", "event_representation",

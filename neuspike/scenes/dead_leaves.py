@@ -12,7 +12,7 @@ training) do not make a world; these scenes add endless variety and, above all, 
   other. The composite is ``out = out * (1 - alpha) + alpha * value`` from back to front.
 
 Every shape carries a mild linear shading and the layers a little smooth texture, so regions are
-not perfectly flat. All randomness comes from ``spec.seed`` (:func:`neuspike.rng.derive_rng`):
+not perfectly flat. All randomness comes from ``spec.seed`` (:func:`neuspike.utils.rng.derive_rng`):
 the same spec renders the same bytes. Layer planes are drawn at twice the resolution and
 area-averaged (anti-aliased edges), mirror-extended and sampled bilinearly at exact sub-pixel
 positions like the ``pan`` scene, so any motion stays seamless. Luma in [0, 1] becomes radiance
@@ -26,7 +26,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from neuspike.rng import derive_rng
+from neuspike.utils.rng import derive_rng
 from neuspike.scenes.radiance import luma_to_radiance
 from neuspike.scenes.sampling import mirror_extend, sample_translated
 from neuspike.scenes.scene import Scene

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.errors import InputError
-from neuspike.parallel import KERNEL_LOCK, resolve_backend
+from neuspike.utils.parallel import KERNEL_LOCK, resolve_backend
 
 try:  # numba is a dependency, but scenes must still render where it cannot be imported
     from neuspike.scenes import sampling_kernels as _kernels

@@ -78,10 +78,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
-from neuspike.parallel import resolve_backend
+from neuspike.utils.parallel import resolve_backend
 from neuspike.sensors.dvs_pixel import (DARK_FLOOR_8BIT, I01_OFFSET, I01_SCALE, REFERENCE_WHITE_8BIT,
                                         SHOT_NOISE_BRIGHT_FACTOR, log_intensity)
 from neuspike.sensors.event_capture import STAGE_ORDER, Capture

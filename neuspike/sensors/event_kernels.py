@@ -22,7 +22,7 @@ the same precision (float32 pixel state, float64 crossing times), so the events 
 :func:`write_events`
     the ordered keys decoded straight into the output arrays (t, x, y, p).
 
-Import this module only where numba is importable (see :func:`neuspike.parallel.resolve_backend`).
+Import this module only where numba is importable (see :func:`neuspike.utils.parallel.resolve_backend`).
 """
 
 from __future__ import annotations

@@ -40,11 +40,11 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from neuspike.checks import check_ndim, check_nonnegative, check_positive, check_positive_int, check_size
+from neuspike.utils.checks import check_ndim, check_nonnegative, check_positive, check_positive_int, check_size
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
-from neuspike.parallel import KERNEL_LOCK, parallel_usable
-from neuspike.parallel import resolve_backend
+from neuspike.utils.parallel import KERNEL_LOCK, parallel_usable
+from neuspike.utils.parallel import resolve_backend
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, SpikeStream
 
 __all__ = [
@@ -221,7 +221,7 @@ def integrate_and_fire(
         ``"numpy"``: the plain NumPy plane loop; ``"auto"``: numba where it can be imported.
         Same planes and charge, bit for bit. (A process forked after a GNU OpenMP parallel region
         ran takes the NumPy path: that runtime cannot start in such a child; see
-        :mod:`neuspike.parallel`.)
+        :mod:`neuspike.utils.parallel`.)
 
     Returns
     -------
@@ -275,7 +275,7 @@ def integrate_and_fire(
 
 def _runnable(engine: str) -> str:
     """The backend that will actually run: ``"numpy"`` for ``"numba"`` where a parallel kernel cannot
-    start (a child forked after a GNU OpenMP region ran in its parent: :mod:`neuspike.parallel`)."""
+    start (a child forked after a GNU OpenMP region ran in its parent: :mod:`neuspike.utils.parallel`)."""
     return "numpy" if engine == "numba" and not parallel_usable() else engine
 
 

@@ -11,7 +11,7 @@ leave the charge (``NaN + x`` is NaN and ``NaN >= phi`` is false), nor can +inf;
 finds no negative value and a finite final charge knows every value was finite and >= 0, and
 otherwise looks for the offending frame in a slow path that runs only on bad input.
 
-Import this module only where numba is importable (see :func:`neuspike.parallel.resolve_backend`).
+Import this module only where numba is importable (see :func:`neuspike.utils.parallel.resolve_backend`).
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from typing import Iterable
 import numpy as np
 
 from neuspike.conditions import EVENTS, NOISE_LEVELS, SPIKES, Condition, Effect, merge_effects
-from neuspike.resources import check_disk, check_file_size_limit, check_memory, format_bytes
+from neuspike.utils.resources import check_disk, check_file_size_limit, check_memory, format_bytes
 from neuspike.simulation.recording import SensorConfig, check_modalities
 
 #: Bytes of one event held in memory: t (float64), x, y (uint16), p (int8), and one copy when joined.

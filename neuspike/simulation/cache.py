@@ -45,10 +45,10 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from neuspike.atomic import write_with
+from neuspike.utils.atomic import write_with
 from neuspike.conditions import EVENTS, SPIKES, Condition
 from neuspike.errors import FormatError
-from neuspike.jsonio import canonical_json, stable_hash
+from neuspike.utils.jsonio import canonical_json, stable_hash
 from neuspike.scenes import SceneSpec
 from neuspike.simulation.recording import MODALITIES, SIMULATOR_VERSION, Recording, SensorConfig, check_modalities
 from neuspike.streams import EventStream, SpikeStream

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Iterable
 
-from neuspike.checks import check_nonnegative
+from neuspike.utils.checks import check_nonnegative
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
 from neuspike.sample import Sample

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from neuspike.checks import check_nonnegative, check_positive, parse_size
+from neuspike.utils.checks import check_nonnegative, check_positive, parse_size
 from neuspike.conditions import NOISE_LEVELS, Condition, parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ
@@ -174,7 +174,7 @@ def _run(args: argparse.Namespace) -> int:
     if size is not None:
         _check_work(args, out, mode, size, sensor=sensor, condition=condition, modalities=modalities)
 
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
     from neuspike.simulation.window import simulate_window
     from neuspike.simulation.writing import write_recording, write_sequence

@@ -7,7 +7,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.conditions import EVENTS, SPIKES
 from neuspike.errors import InputError
 from neuspike.sample import Sample

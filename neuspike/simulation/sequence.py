@@ -13,7 +13,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from neuspike.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.conditions import EVENTS, SPIKES, Condition
 from neuspike.errors import InputError
 from neuspike.simulation.cameras import base_meta, make_cameras, merge_stages, tag_stages

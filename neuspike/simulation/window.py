@@ -18,7 +18,7 @@ import numpy as np
 
 from neuspike.conditions import EVENTS, SPIKES, Condition
 from neuspike.errors import InputError
-from neuspike.rng import derive_rng
+from neuspike.utils.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.simulation.cameras import base_meta, make_cameras, tag_stages
 from neuspike.simulation.recording import MODALITIES, Recording, SensorConfig, check_modalities

@@ -14,13 +14,13 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from neuspike.atomic import write_bytes, write_json, write_text
+from neuspike.utils.atomic import write_bytes, write_json, write_text
 from neuspike.conditions import EVENTS, SPIKES, Condition
 from neuspike.formats.event_writers import EventsH5Writer, write_events_h5
 from neuspike.formats.staging import staged_folder
 from neuspike.formats.vidar_dat import DatWriter, write_dat
-from neuspike.images import write_png
-from neuspike.resources import check_file_size_limit
+from neuspike.formats.images import write_png
+from neuspike.utils.resources import check_file_size_limit
 from neuspike.simulation.budget import EVENTS_H5_CHUNK, Budget, check_budget, events_h5_bytes
 from neuspike.simulation.recording import MODALITIES, Recording, SensorConfig, check_modalities
 from neuspike.simulation.sequence import simulate_sequence

@@ -1,6 +1,6 @@
 """Training learned methods on simulated data: ``python -m neuspike.train NAME``.
 
-One system for every learned method (:class:`~neuspike.learned.LearnedMethod`): the method offers
+One system for every learned method (:class:`~neuspike.methods.learned.LearnedMethod`): the method offers
 ``for_training()`` (a fresh module), ``build_module()`` and ``encode(sample)``; the trainer does the
 rest.
 

@@ -158,7 +158,7 @@ def spec_from_args(args: argparse.Namespace):
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
     if args.view is not None:
-        from neuspike.checks import parse_size
+        from neuspike.utils.checks import parse_size
 
         kw["view"] = parse_size(args.view)
     for name in ("kinds", "noise_levels"):

@@ -1,6 +1,6 @@
 """A run folder's files: the frozen spec, the checkpoint, the log, the exported weights and their card.
 
-Everything is written atomically (:mod:`neuspike.atomic`); a killed run leaves either the old file
+Everything is written atomically (:mod:`neuspike.utils.atomic`); a killed run leaves either the old file
 or the new one, and the temporaries a kill leaves behind are removed when the run starts again
 (:func:`remove_temporaries`).
 
@@ -28,7 +28,7 @@ import subprocess
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-from neuspike import atomic
+from neuspike.utils import atomic
 from neuspike.errors import FormatError, InputError
 from neuspike.train.spec import TrainSpec, load_spec
 
@@ -227,7 +227,7 @@ def export_weights(state: Mapping[str, Any], folders: Iterable[str | os.PathLike
     bfloat16 above."""
     import torch
 
-    from neuspike.weights import save_safetensors
+    from neuspike.methods.weights import save_safetensors
 
     count = sum(v.numel() for v in state.values() if v.is_floating_point())
     dtype = None if count < 1_000_000 else torch.bfloat16

@@ -1,9 +1,9 @@
 """The training loop, one for every learned method and data kind.
 
-The method named by ``spec.method`` is a registered :class:`~neuspike.learned.LearnedMethod`; the
-trainer builds it with :meth:`~neuspike.learned.LearnedMethod.for_training` (a fresh module from
+The method named by ``spec.method`` is a registered :class:`~neuspike.methods.learned.LearnedMethod`; the
+trainer builds it with :meth:`~neuspike.methods.learned.LearnedMethod.for_training` (a fresh module from
 ``torch.manual_seed(spec.seed)``, no weights file) and reads samples through the method's own
-:meth:`~neuspike.learned.LearnedMethod.encode`. The data section of the spec picks the task:
+:meth:`~neuspike.methods.learned.LearnedMethod.encode`. The data section of the spec picks the task:
 :class:`~neuspike.train.windows.WindowTask` (single windows) or
 :class:`~neuspike.train.sequences.SequenceTask` (sequences, for recurrent methods); the task draws
 each step's batch from the seed and the step alone, so a resumed run computes what a straight one
@@ -39,7 +39,7 @@ STALE_SHARD_S = 600.0
 
 def training_method(spec: TrainSpec):
     """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights)."""
-    from neuspike.learned import LearnedMethod
+    from neuspike.methods.learned import LearnedMethod
     from neuspike.methods import entry
 
     e = entry(spec.method)
@@ -70,14 +70,14 @@ class Trainer:
 
             self.task = SequenceTask(spec, self.method)
         if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
-            from neuspike.weights import load_safetensors, load_state_strict
+            from neuspike.methods.weights import load_safetensors, load_state_strict
 
             load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from)
         if spec.optimizer == "adamw":
             self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
         else:
             self.optim = torch.optim.Adam(self.module.parameters(), lr=spec.lr)
-        from neuspike.learned import resolve_precision
+        from neuspike.methods.learned import resolve_precision
 
         self.precision = resolve_precision(spec.precision, torch.device("cpu"))
         self.task.precision = self.precision
@@ -133,7 +133,7 @@ class Trainer:
                 tqdm.write(f"step {self.step} {variant}: " + ", ".join(f"{k} {v:.4f}" for k, v in scores.items()))
 
     def _targets(self) -> list[Path]:
-        from neuspike.weights import PACKAGE_WEIGHTS
+        from neuspike.methods.weights import PACKAGE_WEIGHTS
 
         targets = [self.out]
         if self.spec.export:

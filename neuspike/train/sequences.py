@@ -40,10 +40,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from neuspike import atomic
+from neuspike.utils import atomic
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
-from neuspike.rng import derive_rng
+from neuspike.utils.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.scenes.motion import backward_flow, image_speed_px_s, scene_time_s
 from neuspike.simulation.cell import simulate_sample

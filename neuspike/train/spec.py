@@ -253,7 +253,7 @@ class TrainSpec:
     Parameters
     ----------
     method : str
-        A registered learned method (:class:`~neuspike.learned.LearnedMethod`).
+        A registered learned method (:class:`~neuspike.methods.learned.LearnedMethod`).
     data : WindowData or SequenceData
         What is simulated and how it is scored.
     out_dir : str
@@ -272,7 +272,7 @@ class TrainSpec:
     threads : int or None
         torch threads (None: as the process has them).
     precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
-        Autocast precision (:func:`neuspike.learned.resolve_precision`; auto = bfloat16 where the CPU
+        Autocast precision (:func:`neuspike.methods.learned.resolve_precision`; auto = bfloat16 where the CPU
         computes it natively).
     params : dict
         Overrides of the method's registered parameters.

@@ -36,11 +36,11 @@ import cv2
 import numpy as np
 import torch
 
-from neuspike import atomic
-from neuspike.atomic import write_bytes
+from neuspike.utils import atomic
+from neuspike.utils.atomic import write_bytes
 from neuspike.conditions import EVENT_PRESETS, Condition, effect
 from neuspike.errors import FormatError, InputError
-from neuspike.rng import derive_rng
+from neuspike.utils.rng import derive_rng
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec
 from neuspike.scenes.photos import read_photo
@@ -224,7 +224,7 @@ class WindowTask:
 
     * **order**: step ``k`` uses the windows ``perm_e[j]`` of epoch ``e`` (a permutation drawn from
       ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``.
-    * **inputs**: the method's own :meth:`~neuspike.learned.LearnedMethod.encode` (one step), the
+    * **inputs**: the method's own :meth:`~neuspike.methods.learned.LearnedMethod.encode` (one step), the
       target the sample's ground truth (1, 1, H, W).
     * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction

@@ -26,7 +26,7 @@ earlier run's. A run replaces every output of the earlier one, the videos and fr
 no longer runs included (its ``video.json`` names them); other files in ``--out`` are kept. A video
 is published only when it is a whole MPEG-4 file (OpenCV does not report failed writes: a full disk
 or a file size limit is an error, not a truncated video). Ground truth of a recording smaller than
-the SSIM window is not used, as for a single frame (:mod:`neuspike.recordings`). Errors print one
+the SSIM window is not used, as for a single frame (:mod:`neuspike.formats.samples`). Errors print one
 line and exit with status 2.
 """
 
@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from neuspike.cli import ArgumentParser, UsageError
+from neuspike.utils.cli import ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -148,7 +148,7 @@ def _split(values: Sequence[str]) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     """The frozen spec of parsed arguments (usage checks only; files are checked by :func:`run`)."""
-    from neuspike.cli import weights_dir_from_env
+    from neuspike.utils.cli import weights_dir_from_env
 
     if args.out is None:
         raise InputError("give an output folder with --out DIR")
@@ -205,7 +205,7 @@ def _range(spec: VideoSpec, span: tuple[float, float]) -> tuple[float, float]:
 
 def _history(spec: VideoSpec) -> float:
     """Seconds of event history before each window (``--event-history``, default the single-frame one)."""
-    from neuspike.recordings import EVENT_HISTORY_S
+    from neuspike.formats.samples import EVENT_HISTORY_S
 
     history = EVENT_HISTORY_S if spec.event_history_s is None else spec.event_history_s
     if history < 0 or not math.isfinite(history):
@@ -314,9 +314,9 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
     return the summary written to ``video.json``."""
     import numpy as np
 
-    from neuspike.atomic import write_text
-    from neuspike.images import to_uint8, write_png
-    from neuspike.jsonio import portable_path
+    from neuspike.utils.atomic import write_text
+    from neuspike.formats.images import to_uint8, write_png
+    from neuspike.utils.jsonio import portable_path
     from neuspike.video.stream import stream_methods
     from neuspike.video.truth import METRIC_COLUMNS, FlickerMeter, plot_metrics, score_frame
     from neuspike.video.writers import (
@@ -398,7 +398,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
         raise
     write_png(out / "contact_sheet.png", sheet_img, clip=False)
     if metric_rows:
-        from neuspike.atomic import replacing
+        from neuspike.utils.atomic import replacing
 
         with replacing(out / "metrics.csv") as tmp, open(tmp, "w", newline="") as fh:
             wr = csv.DictWriter(fh, fieldnames=list(METRIC_COLUMNS))

@@ -1,8 +1,8 @@
 """Stream a recording through methods: one image per output instant, memory bounded by the window.
 
 The recording is opened by :func:`neuspike.formats.recording.open_recording` and cut into samples by
-:func:`neuspike.recordings.stream_samples` (the same cut as a single-frame
-:func:`neuspike.recordings.load_sample` at that instant, reading spikes by plane range and events by
+:func:`neuspike.formats.samples.stream_samples` (the same cut as a single-frame
+:func:`neuspike.formats.samples.load_sample` at that instant, reading spikes by plane range and events by
 time range, each read once however high the frame rate); both are re-exported here.
 
 :func:`reconstruct_video` yields ``(time_s, image)`` for one method, :func:`stream_methods` runs
@@ -20,10 +20,10 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from neuspike.checks import check_positive
+from neuspike.utils.checks import check_positive
 from neuspike.errors import InputError
 from neuspike.formats.recording import RecordingReader, open_recording
-from neuspike.recordings import EVENT_HISTORY_S, stream_samples
+from neuspike.formats.samples import EVENT_HISTORY_S, stream_samples
 from neuspike.sample import Sample
 
 __all__ = [

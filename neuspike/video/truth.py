@@ -89,7 +89,7 @@ def _scene_truth(meta: dict[str, Any]) -> GroundTruth:
 
 def _listed_truth(source: str, times: np.ndarray, files: list[Path], tolerance_s: float,
                   height: int, width: int) -> GroundTruth:
-    from neuspike.recordings import load_ground_truth
+    from neuspike.formats.samples import load_ground_truth
 
     cache: dict[int, np.ndarray] = {}
 
@@ -184,7 +184,7 @@ def plot_metrics(csv_path: str | os.PathLike, png_path: str | os.PathLike) -> Pa
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from neuspike.atomic import replacing
+    from neuspike.utils.atomic import replacing
 
     rows: dict[str, list[tuple[float, float, float, float]]] = {}
     with open(csv_path, newline="") as fh:

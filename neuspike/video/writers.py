@@ -5,7 +5,7 @@ with ``.`` and containing ``.partial``) and renamed to its final name only when 
 :meth:`Mp4Writer.close` and :meth:`FrameFolder.close` publish, :meth:`~Mp4Writer.abort` removes.
 A run that fails therefore leaves no file under a final name.
 
-Images are float (H, W) in [0, 1]; 8-bit conversion is :func:`neuspike.images.to_uint8` with ``clip=True``.
+Images are float (H, W) in [0, 1]; 8-bit conversion is :func:`neuspike.formats.images.to_uint8` with ``clip=True``.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Sequence
 
 import numpy as np
 
-from neuspike.atomic import publish
+from neuspike.utils.atomic import publish
 from neuspike.errors import InputError, SourceError
-from neuspike.images import to_uint8
+from neuspike.formats.images import to_uint8
 
 __all__ = [
     "label_image",

@@ -34,9 +34,9 @@ def main(argv: list[str] | None = None) -> int:
 
     import pandas as pd
 
-    from neuspike.atomic import write_text
+    from neuspike.utils.atomic import write_text
     from neuspike.metrics import no_reference
-    from neuspike.images import to_uint8, write_png
+    from neuspike.formats.images import to_uint8, write_png
     from neuspike.video.writers import label_image, tile_row
 
     out = Path(args.out)

@@ -23,7 +23,7 @@ import torch
 here = Path(__file__).resolve().parent
 sys.path.insert(0, str(here.parents[1]))
 
-from neuspike.checks import parse_size  # noqa: E402
+from neuspike.utils.checks import parse_size  # noqa: E402
 from neuspike.methods import create  # noqa: E402
 from neuspike.train.loop import training_method  # noqa: E402
 from neuspike.train.sequences import build_shard, load_shard, validate_sequences  # noqa: E402

@@ -15,7 +15,7 @@ from neuspike.methods import create, entry
 from neuspike.scenes import SceneSpec
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
-from neuspike.weights import save_safetensors
+from neuspike.methods.weights import save_safetensors
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -130,7 +130,7 @@ HISTORY_TOLERANCE = 0.01
 def test_output_after_warm_up_does_not_depend_on_where_history_started(name, pan_sample):
     """Shipped weights (seeded untrained ones when none are shipped): cutting the history to its last
     10 windows changes the image by at most :data:`HISTORY_TOLERANCE` on average."""
-    from neuspike.weights import PACKAGE_WEIGHTS
+    from neuspike.methods.weights import PACKAGE_WEIGHTS
 
     if not (PACKAGE_WEIGHTS / entry(name).weights.file).is_file():
         pytest.skip(f"no shipped {name} weights")

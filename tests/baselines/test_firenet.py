@@ -26,9 +26,9 @@ from baselines.firenet import (
 from neuspike.conditions import Condition
 from neuspike.errors import FormatError, InputError
 from neuspike.methods import MethodUnavailable, create
-from neuspike.weights import PACKAGE_WEIGHTS, WEIGHTS_ENV, WeightsNotFound, resolve_weights
+from neuspike.methods.weights import PACKAGE_WEIGHTS, WEIGHTS_ENV, WeightsNotFound, resolve_weights
 from neuspike.metrics import ssim
-from neuspike.representations import event_windows
+from neuspike.methods.representations import event_windows
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.simulation.window import simulate_window
@@ -283,7 +283,7 @@ def test_module_has_the_published_parameter_count():
 @needs_weights
 @pytest.mark.parametrize("native, expected", [(True, "bfloat16"), (False, "float32")])
 def test_auto_precision_follows_the_cpu_and_is_recorded(monkeypatch, native, expected):
-    import neuspike.learned as learned
+    import neuspike.methods.learned as learned
 
     monkeypatch.setattr(learned, "native_bfloat16", lambda: native)
     method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")

@@ -18,7 +18,7 @@ from baselines.fusion_complementary import (
     complementary_filter,
     matched_cutoff_hz,
 )
-from neuspike.normalisation import rate_to_image
+from neuspike.methods.normalisation import rate_to_image
 from baselines.tfp import TFP
 from neuspike.conditions import Condition
 from neuspike.errors import InputError

@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from baselines import snm
-from neuspike.normalisation import GAIN, ROBUST, robust_scale
+from neuspike.methods.normalisation import GAIN, ROBUST, robust_scale
 from neuspike.errors import InputError
 from neuspike.sample import Sample
 from neuspike.streams import SpikeStream

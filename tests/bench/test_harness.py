@@ -278,7 +278,7 @@ def test_changed_config_is_refused_unless_forced(plugin, tmp_path):
 
 
 def test_cache_round_trip_is_bit_exact(tmp_path):
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import make_scene
     from neuspike.simulation.window import simulate_window
 

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from bench.provenance import command_line
-from neuspike.jsonio import portable_path
+from neuspike.utils.jsonio import portable_path
 
 
 def test_paths_inside_or_beside_the_current_folder_become_relative(tmp_path, monkeypatch):

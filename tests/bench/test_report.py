@@ -17,7 +17,7 @@ from bench import report, reporting
 from bench import tables as tb
 from bench.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
-from neuspike.jsonio import canonical_json
+from neuspike.utils.jsonio import canonical_json
 
 LIGHTS = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)
 SCENES = ("pan:camera", "fan:coins")

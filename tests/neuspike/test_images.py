@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from neuspike.errors import InputError
-from neuspike.images import encode_png, to_uint8, write_png
+from neuspike.formats.images import encode_png, to_uint8, write_png
 
 
 def test_round_trip_of_every_level_and_the_clip_rule(tmp_path):

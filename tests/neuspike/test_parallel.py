@@ -1,4 +1,4 @@
-"""neuspike.parallel: a child forked after a GNU OpenMP parallel region takes the reference paths."""
+"""neuspike.utils.parallel: a child forked after a GNU OpenMP parallel region takes the reference paths."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from baselines import snm, tfstp
-from neuspike import parallel
+from neuspike.utils import parallel
 from neuspike.scenes import SceneSpec, make_scene
 
 PLANES = np.random.default_rng(0).random((48, 12, 17)) < 0.3

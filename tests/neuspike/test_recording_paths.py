@@ -17,7 +17,7 @@ import pytest
 
 from neuspike.errors import FormatError
 from neuspike.formats.vidar_dat import write_dat
-from neuspike.recordings import load_sample, open_recording, stream_samples
+from neuspike.formats.samples import load_sample, open_recording, stream_samples
 from neuspike.reconstruct import main as reconstruct_main
 from neuspike.video.cli import main as video_main
 

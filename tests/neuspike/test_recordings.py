@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from neuspike.errors import InputError, SourceError
-from neuspike.recordings import DEFAULT_WINDOW_PLANES, EVENT_HISTORY_S, load_ground_truth, load_sample
+from neuspike.formats.samples import DEFAULT_WINDOW_PLANES, EVENT_HISTORY_S, load_ground_truth, load_sample
 from neuspike.streams import EventStream
 from tests.shared_data import SHARED
 

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from neuspike.errors import InputError
-from neuspike.representations import normalize_voxel_grid, spike_bins, voxel_grid
+from neuspike.methods.representations import normalize_voxel_grid, spike_bins, voxel_grid
 from neuspike.streams import EventStream
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from neuspike.conditions import Condition, effect
 from neuspike.errors import InputError
-from neuspike.rng import derive_rng
+from neuspike.utils.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.simulate import main
 from neuspike.simulation.recording import SensorConfig

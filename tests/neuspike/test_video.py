@@ -18,12 +18,12 @@ from neuspike.formats.event_writers import write_events_h5, write_events_npz
 from neuspike.formats.spike_npz import write_spike_npz
 from neuspike.formats.vidar_dat import write_dat
 from neuspike.methods import Method
-from neuspike.recordings import load_sample
+from neuspike.formats.samples import load_sample
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.video import check_fps, frame_times, open_recording, reconstruct_video, stream_samples
 from neuspike.video.cli import main
 from neuspike.video.truth import FlickerMeter, ground_truth_for
-from neuspike.images import to_uint8
+from neuspike.formats.images import to_uint8
 
 H, W = 24, 32
 RATE = 20_000.0
@@ -169,7 +169,7 @@ def test_flicker_closed_forms(rng):
 
 def test_scene_ground_truth_follows_time_scale(tmp_path):
     from neuspike.conditions import Condition
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
     from neuspike.simulation.writing import write_sequence
 
@@ -203,7 +203,7 @@ def _run(*argv):
 
 def test_command_writes_videos_frames_and_metrics(tmp_path, rng):
     from neuspike.conditions import Condition
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
     from neuspike.simulation.writing import write_sequence
 
@@ -293,7 +293,7 @@ def test_firenet_carries_its_state_between_frames(tmp_path, one_torch_thread):
         pytest.skip("FireNet weights not available")
     from neuspike.conditions import Condition
     from neuspike.metrics import ssim
-    from neuspike.rng import derive_rng
+    from neuspike.utils.rng import derive_rng
     from neuspike.scenes import SceneSpec, make_scene
     from neuspike.simulation.writing import write_sequence
 

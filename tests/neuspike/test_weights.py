@@ -13,7 +13,7 @@ import torch
 from baselines.firenet import FireNet, FireNetModule
 from neuspike.errors import InputError
 from neuspike.methods import WeightsConfig, create, entry, register, unregister
-from neuspike.weights import PACKAGE_WEIGHTS, WeightsMismatch, file_sha256, save_safetensors
+from neuspike.methods.weights import PACKAGE_WEIGHTS, WeightsMismatch, file_sha256, save_safetensors
 
 
 @pytest.fixture

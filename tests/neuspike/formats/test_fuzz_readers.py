@@ -80,7 +80,7 @@ def test_fuzzed_meta_json_beside_a_recording_gives_typed_errors_or_samples(tmp_p
     """``meta.json`` values of every wrong type: load_sample raises typed errors, never TypeError."""
     from neuspike.errors import NeuSpikeError
     from neuspike.formats import write_spike_npz
-    from neuspike.recordings import load_sample
+    from neuspike.formats.samples import load_sample
     from neuspike.streams import SpikeStream
 
     rng = np.random.default_rng(5)

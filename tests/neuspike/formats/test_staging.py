@@ -174,7 +174,7 @@ def test_commands_report_an_unwritable_out_in_one_line_before_any_work(tmp_path,
 
 def test_a_ground_truth_below_the_ssim_window_is_refused_before_any_method_runs(tmp_path):
     from neuspike.formats import write_spike_npz
-    from neuspike.recordings import load_sample
+    from neuspike.formats.samples import load_sample
     from neuspike.streams import SpikeStream
 
     spikes = write_spike_npz(tmp_path / "s.npz", SpikeStream(np.zeros((8, 8, 10), bool), gain=0.25))

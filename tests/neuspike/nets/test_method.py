@@ -10,7 +10,7 @@ from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod, event_representatio
 from neuspike.nets.representations import interval_rate
 from neuspike.sample import Sample
 from neuspike.streams import EventStream, SpikeStream
-from neuspike.weights import save_safetensors
+from neuspike.methods.weights import save_safetensors
 
 H, W, T = 12, 20, 256
 
@@ -155,7 +155,7 @@ def test_a_truncated_weights_file_is_a_format_error(weights_dir):
     path = weights_dir / "neuspike-net.safetensors"
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
-    from neuspike.weights import WeightsMismatch
+    from neuspike.methods.weights import WeightsMismatch
 
     with pytest.raises(FormatError), pytest.warns(WeightsMismatch):  # its card's sha256 is the whole file's
         create("neuspike-net", weights_dir=weights_dir)

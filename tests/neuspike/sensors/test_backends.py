@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from neuspike.errors import InputError
-from neuspike import parallel as backends
+from neuspike.utils import parallel as backends
 from neuspike.sensors.event_camera import EventCamera
 from neuspike.sensors.spike_camera import SpikeCamera, integrate_and_fire
 

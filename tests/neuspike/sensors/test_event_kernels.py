@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from neuspike.conditions import EVENT_PRESETS, effect
-from neuspike.parallel import NUMBA_AVAILABLE
+from neuspike.utils.parallel import NUMBA_AVAILABLE
 from neuspike.sensors.event_camera import EventCamera
 
 pytestmark = pytest.mark.skipif(not NUMBA_AVAILABLE, reason="numba is not importable")

@@ -12,7 +12,7 @@ from neuspike.conditions import effect
 from neuspike.errors import InputError
 from neuspike.formats.vidar_dat import DatWriter, read_dat, write_dat
 from neuspike.sensors import spike_camera
-from neuspike.parallel import NUMBA_AVAILABLE, resolve_backend
+from neuspike.utils.parallel import NUMBA_AVAILABLE, resolve_backend
 from neuspike.sensors.spike_camera import PackedPlanes, SpikeCamera, integrate_and_fire, pack_planes
 from tests.neuspike.sensors.test_spike_camera import BOTH, reference_loop, scenes
 

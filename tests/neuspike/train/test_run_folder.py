@@ -84,7 +84,7 @@ def test_old_spec_files_are_the_runs_the_new_command_makes():
 
 def test_the_shipped_cards_specs_read_as_specs_of_this_trainer():
     """The specs inside the shipped weights' cards (both earlier trainers' forms) are runs of this one."""
-    from neuspike.weights import PACKAGE_WEIGHTS
+    from neuspike.methods.weights import PACKAGE_WEIGHTS
 
     kinds = {}
     for card in sorted(PACKAGE_WEIGHTS.glob("*.json")):

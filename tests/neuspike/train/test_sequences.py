@@ -201,7 +201,7 @@ def test_resume_gives_the_same_weights_as_one_run(tmp_path):
 
 def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
     """A run continued from exported weights (no checkpoint) starts exactly there; its start's validation is the bar."""
-    from neuspike.weights import load_safetensors
+    from neuspike.methods.weights import load_safetensors
 
     spec = _tiny_run(2, 1, tmp_path, "a", export_dir=str(tmp_path / "w"))
     first = train(spec, quiet=True)
@@ -326,7 +326,7 @@ def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
     card = json.loads((tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.json").read_text())
     assert card["training"]["step"] == 4 and "val_ssim" in card["validation"]
     last = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)["module"]
-    from neuspike.weights import load_safetensors
+    from neuspike.methods.weights import load_safetensors
 
     kept = load_safetensors(str(tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.safetensors"))
     for k in last:

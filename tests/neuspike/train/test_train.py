@@ -117,7 +117,7 @@ def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_
     with pytest.raises(InputError, match="safetensors"):
         tiny_spec(tmp_path / "b", shard_dir=shard, init_from=str(tmp_path / "w.pt"))
     second = Trainer(tiny_spec(tmp_path / "b", shard_dir=shard, steps=2, init_from=str(weights)), quiet=True)
-    from neuspike.weights import load_safetensors
+    from neuspike.methods.weights import load_safetensors
 
     saved = load_safetensors(weights)
     for k, v in second.module.state_dict().items():  # the exported (bfloat16) weights, cast back

@@ -24,7 +24,7 @@ import os
 import threading
 from typing import Any
 
-from neuspike.checks import check_positive_int
+from neuspike.utils.checks import check_positive_int
 from neuspike.errors import InputError
 
 __all__ = ["KERNEL_LOCK", "NUMBA_AVAILABLE", "parallel_usable", "resolve_backend", "set_threads"]

@@ -31,8 +31,8 @@ from typing import Any, Mapping, Sequence
 import torch
 from torch import nn
 
-from neuspike import atomic
-from neuspike.cli import WEIGHTS_ENV, weights_dir_from_env  # noqa: F401  (the command line's; re-exported)
+from neuspike.utils import atomic
+from neuspike.utils.cli import WEIGHTS_ENV, weights_dir_from_env  # noqa: F401  (the command line's; re-exported)
 from neuspike.errors import FormatError
 from neuspike.methods import MethodUnavailable
 
@@ -53,7 +53,7 @@ __all__ = [
 ]
 
 #: Folder of the weights trained here, shipped with the package.
-PACKAGE_WEIGHTS = Path(__file__).resolve().parent / "trained"
+PACKAGE_WEIGHTS = Path(__file__).resolve().parents[1] / "trained"
 
 
 class WeightsNotFound(MethodUnavailable):

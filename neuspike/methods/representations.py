@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from neuspike.checks import check_positive_int
+from neuspike.utils.checks import check_positive_int
 from neuspike.errors import InputError
 from neuspike.streams import EventStream
 

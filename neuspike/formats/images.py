@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neuspike.atomic import write_bytes
+from neuspike.utils.atomic import write_bytes
 from neuspike.errors import InputError, NeuSpikeError
 
 __all__ = ["encode_png", "to_uint8", "write_png"]

@@ -11,8 +11,8 @@ Variants are registry entries over one implementation: ``register("tfp-w8", TFP,
 A learned method's entry carries its weights configuration (:class:`WeightsConfig`: the file name
 and the sub-folders of a user's weights folder to look in; ``register(..., weights="x.safetensors")``
 is short for ``weights=WeightsConfig("x.safetensors")``); :func:`create` passes it, the user's
-``weights_dir`` and the ``device`` to the factory (:class:`neuspike.learned.LearnedMethod`), which
-builds the module, then :mod:`neuspike.weights` resolves and loads the file into it. Nothing here
+``weights_dir`` and the ``device`` to the factory (:class:`neuspike.methods.learned.LearnedMethod`), which
+builds the module, then :mod:`neuspike.methods.weights` resolves and loads the file into it. Nothing here
 reads the environment.
 
 One registration contract for everything: a module, an entry point of the group ``neuspike.methods``
@@ -299,7 +299,7 @@ def uses_device(e: MethodEntry) -> bool:
 def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, ...]") -> None:
     """Refuse a ``device`` that none of ``entries`` can use, before any method is built.
 
-    A device some learned method will use must exist here (:func:`neuspike.learned.resolve_device`);
+    A device some learned method will use must exist here (:func:`neuspike.methods.learned.resolve_device`);
     a device other than ``"cpu"`` when no method runs on a torch device is refused too, since it would
     be silently ignored.
 
@@ -311,7 +311,7 @@ def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, .
     if not isinstance(device, str) or not device.strip():
         raise InputError(f"device: expected a torch device name such as 'cpu' or 'cuda', got {device!r}")
     if any(uses_device(e) for e in entries):
-        from neuspike.learned import resolve_device  # imports torch: only when a method needs it
+        from neuspike.methods.learned import resolve_device  # imports torch: only when a method needs it
 
         resolve_device(device)
     elif device != "cpu":

@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
-from neuspike.jsonio import json_default
+from neuspike.utils.jsonio import json_default
 
 
 def _umask() -> int:

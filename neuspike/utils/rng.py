@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.checks import check_int
+from neuspike.utils.checks import check_int
 
 
 def _spawn_key(keys: tuple[Any, ...]) -> tuple[int, ...]:

@@ -48,7 +48,7 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from neuspike.checks import check_nonnegative, check_positive_int
+from neuspike.utils.checks import check_nonnegative, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats.recording import (
     DEFAULT_PLANE_RATE_HZ,

@@ -6,13 +6,13 @@ base owns what all of them share, written once:
 * **weights**: the registry entry carries the weights configuration
   (:class:`neuspike.methods.WeightsConfig`: the file's name and the sub-folders of a user's folder
   to look in); :func:`neuspike.methods.create` passes it with the user's ``weights_dir`` and the
-  file is found by :func:`neuspike.weights.resolve_weights` (the user's folder first, then the
+  file is found by :func:`neuspike.methods.weights.resolve_weights` (the user's folder first, then the
   weights shipped in the package). The constructor builds the module first
   (:meth:`LearnedMethod.build_module`, from the parameters alone), then loads the file into it
   (:meth:`LearnedMethod.load_weights`, a function of the module and the path that returns the
   layout it read), so no subclass has to prepare attributes before the base's ``__init__``.
-  Loading is strict (:func:`neuspike.weights.load_state_strict`); a file whose sha256 differs from
-  its card's is warned about (:func:`neuspike.weights.check_card`). Our own weights are
+  Loading is strict (:func:`neuspike.methods.weights.load_state_strict`); a file whose sha256 differs from
+  its card's is warned about (:func:`neuspike.methods.weights.check_card`). Our own weights are
   safetensors, published ``.pt`` files are read weights-only by the subclass that needs them.
 * **device**: ``"cpu"`` by default; any torch device string the machine has (``"cuda"``,
   ``"cuda:1"``) when asked for. Nothing is ever placed on a GPU unasked.
@@ -47,7 +47,7 @@ from torch import nn
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample
-from neuspike.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
+from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
 
 __all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision"]
 
@@ -125,7 +125,7 @@ class LearnedMethod(Method):
 
     Raises
     ------
-    neuspike.weights.WeightsNotFound
+    neuspike.methods.weights.WeightsNotFound
         When the weights file is not found (a :class:`~neuspike.methods.MethodUnavailable`).
     neuspike.errors.FormatError
         When the file does not fit the module (missing, unused or mis-shaped tensors, truncation).
