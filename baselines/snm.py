@@ -121,7 +121,7 @@ import numpy as np
 import torch
 
 from neuspike.methods.normalisation import rate_to_image
-from neuspike.utils.checks import check_int, check_nonnegative, check_positive
+from neuspike.utils.checks import check_nonnegative, check_positive, check_spike_window
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.utils.parallel import KERNEL_LOCK, resolve_backend
@@ -412,18 +412,10 @@ def _params(params: Any, plane_rate_hz: float) -> _Params:
 
 
 def _check_planes(planes: Any, key_plane: Any) -> tuple[np.ndarray, int]:
-    if not isinstance(planes, np.ndarray):
-        raise InputError(f"planes: expected a numpy array of bool (T, H, W), got {type(planes).__name__}")
-    if planes.ndim != 3:
-        raise InputError(f"planes: expected shape (T, H, W), got {planes.shape}")
-    if planes.dtype != np.bool_:
-        raise InputError(f"planes: expected dtype bool, got {planes.dtype}")
+    planes, key_plane = check_spike_window(planes, key_plane)
     if min(planes.shape) < 1:
         raise InputError(f"planes: expected at least one plane of at least 1x1 pixels, got shape {planes.shape}")
-    key_plane = check_int("key_plane", key_plane, what="an integer plane index")
-    if not 0 <= key_plane < planes.shape[0]:
-        raise InputError(f"key_plane: expected an index in [0, {planes.shape[0]}), got {key_plane}")
-    return np.ascontiguousarray(planes), int(key_plane)
+    return np.ascontiguousarray(planes), key_plane
 
 
 @dataclass(frozen=True)
