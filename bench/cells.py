@@ -49,7 +49,7 @@ import torch
 from bench.grid import Cell
 from bench.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
-from neuspike.errors import InputError
+from neuspike.errors import InputError, one_line
 from neuspike.utils.jsonio import canonical_json
 from neuspike.utils.parallel import set_threads
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
@@ -238,12 +238,6 @@ def instances(names: tuple[str, ...] | list[str], setup: WorkerSetup) -> dict[st
 # ----------------------------------------------------------------------------------------------
 # Running a cell
 # ----------------------------------------------------------------------------------------------
-
-def one_line(exc: BaseException) -> str:
-    """``Type: message`` on one line (newlines become `` | ``)."""
-    text = f"{type(exc).__name__}: {exc}"
-    return " | ".join(part.strip() for part in text.splitlines() if part.strip())
-
 
 def cell_rng(cell: Cell) -> np.random.Generator:
     """The generator of every random draw of the cell's simulation."""

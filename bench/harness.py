@@ -52,13 +52,14 @@ from typing import Any
 import pandas as pd
 
 from bench import grid as grids
-from bench.cells import CellTask, WorkerSetup, instances, one_line, plugin_names, prepare_worker, run_cell
+from bench.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
 from bench.executors import DaskExecutor, make_executor
 from bench.grid import Grid
 from bench.provenance import collect, finish, now_iso
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
+from neuspike.utils.checks import check_positive_int
 from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
@@ -500,8 +501,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
     remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
     threads = execution.threads
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-        raise InputError(f"threads: expected a whole number >= 1, got {threads!r}")
+    if threads is not None:
+        threads = check_positive_int("threads", threads)
     if threads is None:
         usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         threads = 1 if remote else max(1, usable // max(1, executor.workers))

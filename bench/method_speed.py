@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from neuspike.errors import InputError
+from neuspike.errors import InputError, one_line
 from neuspike.utils.parallel import set_threads
 
 WIDTH, HEIGHT = 400, 250
@@ -297,7 +297,7 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
                     if _TFP.covers(name):
                         row["window_41"] = tfp_window_planes(method, short.spikes.num_planes)
             except Exception as exc:  # a failing method is a row
-                row.update(status="error", error=timer.one_line(exc))
+                row.update(status="error", error=one_line(exc))
         if log:
             log(f"{name}: " + (_spread(row, "ms_256") + " ms" if row["status"] == "ok" else f"{row['status']} ({row['error']})"))
         rows.append(row)

@@ -23,7 +23,7 @@ from bench import grid as grids
 from bench import tables as tb
 from neuspike.utils.checks import check_int
 from neuspike.conditions import Condition
-from neuspike.errors import InputError
+from neuspike.errors import InputError, one_line
 from neuspike.utils.parallel import set_threads
 from neuspike.sample import Sample
 from neuspike.simulation.cell import simulate_sample
@@ -208,11 +208,6 @@ def cut_spike_window(sample: Any, planes: int) -> Any:
 # ----------------------------------------------------------------------------------------------
 # Table 2
 # ----------------------------------------------------------------------------------------------
-
-def one_line(exc: BaseException) -> str:
-    text = f"{type(exc).__name__}: {exc}"
-    return " | ".join(p.strip() for p in text.splitlines() if p.strip())
-
 
 def create_methods(names: Sequence[str], *, weights_dir: str | os.PathLike | None = None,
                    device: str = "cpu") -> dict[str, tuple[Any, str]]:

@@ -49,7 +49,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
@@ -139,7 +139,7 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
                     steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), error="")
     except Exception as exc:  # a failing method is a row with its error, not a crash of the benchmark
         return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps,
-                    error=f"{type(exc).__name__}: {exc}")
+                    error=one_line(exc))
 
 
 def _threads() -> int:

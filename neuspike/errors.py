@@ -21,3 +21,10 @@ class FormatError(NeuSpikeError, ValueError):
 
 class SourceError(NeuSpikeError, OSError):
     """A source (image, video, recording) cannot be found or decoded."""
+
+
+def one_line(exc: BaseException) -> str:
+    """``Type: message`` of an exception on one line (its lines joined by `` | ``): how a command
+    prints an error and how a result row records one."""
+    text = f"{type(exc).__name__}: {exc}"
+    return " | ".join(part.strip() for part in text.splitlines() if part.strip())

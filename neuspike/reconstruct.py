@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
 from neuspike.utils.cli import WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
     import numpy as np
@@ -310,7 +310,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except (OSError, ValueError, ImportError) as exc:  # a reader's or the system's own error
-        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return 2
     return 0
 

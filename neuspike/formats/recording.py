@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.utils.checks import check_positive, check_positive_int
+from neuspike.utils.checks import check_int, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 
@@ -283,8 +283,8 @@ class RecordingReader:
         """
         if plane is not None and at_s is not None:
             raise InputError("give the key instant as a plane index or as a time, not both")
-        if plane is not None and (isinstance(plane, bool) or not isinstance(plane, (int, np.integer)) or plane < 0):
-            raise InputError(f"plane: expected a plane index >= 0, got {plane!r}")
+        if plane is not None:
+            plane = check_int("plane", plane, minimum=0, what="a plane index")
         if at_s is not None:
             at_s = float(at_s)
             if not math.isfinite(at_s):

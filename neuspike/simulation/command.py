@@ -16,7 +16,7 @@ from typing import Any
 
 from neuspike.utils.checks import check_nonnegative, check_positive, parse_size
 from neuspike.conditions import NOISE_LEVELS, Condition, parse_effects
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.streams import VIDAR_PLANE_RATE_HZ
 
 
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except (OSError, MemoryError) as exc:  # the system's own refusal while working (disk full, file size limit)
-        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return 2
 
 

@@ -30,6 +30,7 @@ import torch
 from neuspike.errors import InputError
 from neuspike.train import checkpoint as ck
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
+from neuspike.utils.parallel import set_threads
 
 __all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
 
@@ -181,7 +182,7 @@ class Trainer:
             raise InputError(f"max_minutes: expected a positive number, got {max_minutes}")
         last = spec.steps if until is None else min(int(until), spec.steps)
         if spec.threads is not None:
-            torch.set_num_threads(spec.threads)
+            set_threads(spec.threads)
         ck.remove_temporaries(self.out)
         ck.check_spec(spec)
         for folder in self.task.shard_folders():  # shared with other runs: only writes long dead

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping, Union
 
 from neuspike.errors import InputError
+from neuspike.utils.checks import check_int
 
 __all__ = [
     "DATA_KINDS", "KIND_WEIGHTS", "KINDS", "LIGHTS", "MOTIONS", "NOISE_LEVELS", "SEQUENCE_KINDS",
@@ -45,9 +46,7 @@ _PHOTO_DEFAULT: tuple[str, ...] = ("astronaut", "brick", "cat", "cell", "coffee"
 
 
 def _whole(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
-    return value
+    return check_int(name, value, minimum=minimum)
 
 
 def _check_photos(photos: Any) -> tuple[str, ...]:

@@ -40,6 +40,7 @@ from neuspike.utils import atomic
 from neuspike.utils.atomic import write_bytes
 from neuspike.conditions import EVENT_PRESETS, Condition, effect
 from neuspike.errors import FormatError, InputError
+from neuspike.utils.parallel import set_threads
 from neuspike.utils.rng import derive_rng
 from neuspike.sample import Sample
 from neuspike.scenes import SceneSpec
@@ -163,7 +164,7 @@ def shard_paths(shard_dir: str | os.PathLike, split: str, count: int) -> list[Pa
 
 def _make_one(args: tuple[dict[str, Any], str, int, str, str]) -> str:
     spec_dict, split, index, source_dir, path = args
-    torch.set_num_threads(1)
+    set_threads(1)
     spec = spec_from_dict(spec_dict)
     save_sample(path, simulate_cell(spec, split, index, source_dir))
     return path

@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 from neuspike.utils.cli import ArgumentParser, UsageError
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
     import numpy as np
@@ -450,7 +450,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except (OSError, ValueError, ImportError) as exc:
-        print(f"error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted; nothing was published", file=sys.stderr)
