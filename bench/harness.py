@@ -55,7 +55,7 @@ from bench import grid as grids
 from bench.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
 from bench.executors import DaskExecutor, make_executor
 from bench.grid import Grid
-from bench.provenance import collect, finish, now_iso
+from bench.provenance import LoadWatch, collect, finish, now_iso
 from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
@@ -459,6 +459,20 @@ def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[st
         write_image_png(image_path(images_dir, cell.scene.name, axis, value, name), image)
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _check_oversubscription(workers: int, threads: int) -> None:
+    """Refuse local workers x threads beyond the usable CPUs: oversubscribed threads wait on each other
+    at every small operation, and the timings would measure that instead of the methods."""
+    usable = usable_cpus()
+    if workers * threads > usable:
+        raise InputError(f"--workers {workers} x --threads {threads} = {workers * threads} threads exceed the "
+                         f"{usable} usable CPU(s) here; use --threads {max(1, usable // workers)} (or fewer workers)")
+
+
 def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]:
     """Call ``bench.reporting.build_report(out)`` when that module exists.
 
@@ -497,15 +511,16 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     preflight(spec)
 
     executor = execution.executor
-    if isinstance(executor, str):
-        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
-    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
     threads = execution.threads
     if threads is not None:
         threads = check_positive_int("threads", threads)
+    if isinstance(executor, str):
+        if executor == "local" and threads is not None:
+            _check_oversubscription(check_positive_int("workers", execution.workers), threads)
+        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
+    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
     if threads is None:
-        usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-        threads = 1 if remote else max(1, usable // max(1, executor.workers))
+        threads = 1 if remote else max(1, usable_cpus() // max(1, executor.workers))
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
     setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
 
@@ -568,6 +583,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         history = list(previous.get("previous_runs", [])) + [
             {k: previous.get(k) for k in ("start", "end", "executor", "threads_per_worker",
                                            "cells_computed", "source")}]
+    watch = None if remote else LoadWatch(threads * executor.workers, side_by_side=executor.workers > 1)
     run = collect(executor=executor.describe(), threads_per_worker=threads, start=now_iso(),
                   contended=None if remote else executor.workers > 1)
     run["sweep"] = spec.name
@@ -614,6 +630,8 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
                     skipped.update(result.skipped)
                     if result.threads is not None:
                         observed_threads.add(result.threads)
+                if watch is not None:
+                    watch.read()
                 postfix()
                 bar.update(1)
     finally:
@@ -634,7 +652,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     run = finish(run, cells_total=len(tasks), cells_computed=n_computed, cells_failed=n_failed,
                  cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,
                  threads_observed=sorted(observed_threads), time_split=split,
-                 wall_seconds=outcome.seconds)
+                 wall_seconds=outcome.seconds, **(watch.summary() if watch is not None else {}))
     write_json(out / "metadata.json", run)
     if execution.report and not frame.empty:
         outcome.report_path, outcome.report_note, outcome.report_failed = build_report_if_available(out)

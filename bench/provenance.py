@@ -114,6 +114,64 @@ def command_line(argv: list[str] | None = None) -> list[str]:
     return head + [portable(a) for a in argv[1:]]
 
 
+#: Load of other jobs (1-minute load average beyond this run's own threads) from which timings are
+#: marked as contended: half a core busy with something else.
+OTHER_LOAD_CONTENDED = 0.5
+
+
+def load_1min() -> float | None:
+    """The 1-minute load average, or None where the system does not report it."""
+    try:
+        return float(os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return None
+
+
+class LoadWatch:
+    """The machine's load around a run, and whether other jobs shared it.
+
+    The 1-minute load average is read before the work starts (everything in it is other jobs) and
+    after each finished piece of work, where up to ``own_threads`` of it is this run's own. A run is
+    contended when its cells ran side by side (``side_by_side``) or when other jobs' load reached
+    :data:`OTHER_LOAD_CONTENDED` at any reading (the average lags by about a minute, so a job that
+    starts late in a short run may be missed; the readings are recorded).
+    """
+
+    def __init__(self, own_threads: int, *, side_by_side: bool = False) -> None:
+        self.own_threads = int(own_threads)
+        self.side_by_side = bool(side_by_side)
+        self.before = load_1min()
+        self.readings: list[float] = []
+
+    def read(self) -> None:
+        value = load_1min()
+        if value is not None:
+            self.readings.append(value)
+
+    def other_load(self) -> float | None:
+        """The largest load of other jobs seen: before the run, or beyond this run's threads during it."""
+        if self.before is None:
+            return None
+        return max([self.before] + [max(0.0, r - self.own_threads) for r in self.readings])
+
+    def summary(self) -> dict[str, Any]:
+        """``load_1min`` (before, max, last), ``other_load``, ``timing_contended`` and its reasons."""
+        other = self.other_load()
+        reasons = []
+        if self.side_by_side:
+            reasons.append("cells ran side by side in several workers")
+        if other is not None and other >= OTHER_LOAD_CONTENDED:
+            reasons.append(f"other jobs loaded the machine (load {other:.2f} beyond this run's "
+                           f"{self.own_threads} thread(s))")
+        return {
+            "load_1min": {"before": self.before, "max": max(self.readings, default=None),
+                          "last": self.readings[-1] if self.readings else None},
+            "other_load": other,
+            "timing_contended": bool(reasons) if other is not None or self.side_by_side else None,
+            "contention": reasons,
+        }
+
+
 def collect(*, executor: dict[str, Any], threads_per_worker: int | None, start: str,
             contended: bool | None) -> dict[str, Any]:
     """Metadata of a run that starts now (``end`` is filled by :func:`finish`).

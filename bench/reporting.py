@@ -265,7 +265,9 @@ def title_blocks(inputs: ReportInputs) -> list[tuple[str, str]]:
                             + (f", {mem / 2 ** 30:.0f} GiB" if isinstance(mem, (int, float)) else "")
                             + f", {mach.get('system', '?')}; torch threads per worker: "
                             + f"{meta.get('threads_per_worker', meta.get('threads', '?'))}"
-                            + ("; timings measured with workers side by side (contended)" if meta.get("timing_contended") else "")
+                            + (("; timings contended: " + ", ".join(meta.get("contention")
+                                                                    or ["workers side by side"]))
+                               if meta.get("timing_contended") else "")
                             + "."))
         vers = meta.get("versions") or {}
         blocks.append(("p", "Versions: " + ", ".join(f"{k} {v}" for k, v in vers.items() if v)))

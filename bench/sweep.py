@@ -42,9 +42,11 @@ A rerun of the same command resumes: finished cells are not recomputed. A differ
 in the same --out is refused unless --force.
 
 timing: ms_per_frame is the wall time of one reconstruct call (recurrent methods: including the
-warm-up over the event history). With --workers > 1 cells run side by side and slow each other
-down on a small machine; metadata.json marks such timings (timing_contended). Use python -m
-bench.timing for careful timings.
+warm-up over the event history). --workers x --threads may not exceed the usable CPUs (refused).
+With --workers > 1 cells run side by side and slow each other down on a small machine, and other
+jobs on the machine do the same: metadata.json records the load average before and during the run
+and marks such timings (timing_contended, with the reasons in contention; the report says so). Use
+python -m bench.timing for careful timings.
 
 exit status: 0 all cells ok; 1 a method or simulation failed (unless --allow-failures) or cells are
 missing; 2 invalid options or a changed configuration; 130 interrupted (rerun to resume)."""

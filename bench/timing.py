@@ -36,7 +36,6 @@ spread columns say how much.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -126,7 +125,7 @@ def run(args: argparse.Namespace) -> Path:
     from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
     from neuspike.utils.atomic import write_json, write_text
-    from bench.provenance import command_line, machine, now_iso, package_versions, source_state
+    from bench.provenance import LoadWatch, command_line, machine, now_iso, package_versions, source_state
     from neuspike.utils.jsonio import portable_path
     from bench.reporting import write_timing_tables
 
@@ -162,7 +161,7 @@ def run(args: argparse.Namespace) -> Path:
             # time the methods at the sweep's own resolution too, so the chart pairs like with like
             sizes = (*sizes, sweep_size)
             print(f"also timing at the sweep's resolution {sweep_size[0]}x{sweep_size[1]}", file=sys.stderr)
-    load_before = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    watch = LoadWatch(torch.get_num_threads())
 
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
@@ -171,17 +170,16 @@ def run(args: argparse.Namespace) -> Path:
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": command_line(), "executor": {"executor": "timing", "workers": 1},
-            "threads": torch.get_num_threads(), "timing_contended": False, "start": now_iso(), "end": None}
+            "threads": torch.get_num_threads(), "timing_contended": None, "start": now_iso(), "end": None}
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
                      weights_dir=weights, device=args.device, threads=args.threads,
-                     log=lambda s: print(s, file=sys.stderr, flush=True))
+                     log=lambda s: (watch.read(), print(s, file=sys.stderr, flush=True)))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
-    load_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
-    meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0,
-            "load_1min": {"before": load_before, "after": load_after},
-            "timing_contended": bool(max(load_before, load_after) > (os.cpu_count() or 1))}
+    meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0, **watch.summary()}
+    if meta["timing_contended"]:
+        print("note: timings contended: " + "; ".join(meta["contention"]), file=sys.stderr)
     write_json(out / "metadata.json", meta)
     write_timing_tables(out / "tables", timing, meta)
 

@@ -56,3 +56,39 @@ def test_a_sweeps_config_names_its_weights_folder_without_the_machines_path(tmp_
                      weights=str(tmp_path / "shared" / "weights"), axis="light")
     assert os.path.isabs(spec.weights)  # the cells' identity keeps the resolved folder
     assert spec.as_dict()["weights"] == os.path.join("..", "shared", "weights")
+
+
+def test_other_jobs_load_marks_timings_as_contended(monkeypatch):
+    from bench import provenance
+
+    loads = iter([0.1, 1.2, 1.3, 2.9])  # before; then this run's one thread, then another job joins
+    monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(loads), 0.0, 0.0))
+    watch = provenance.LoadWatch(1)
+    for _ in range(3):
+        watch.read()
+    summary = watch.summary()
+    assert summary["other_load"] == 2.9 - 1
+    assert summary["timing_contended"] is True and "other jobs" in summary["contention"][0]
+    assert summary["load_1min"] == {"before": 0.1, "max": 2.9, "last": 2.9}
+    quiet = iter([0.05, 0.9, 1.1])
+    monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(quiet), 0.0, 0.0))
+    watch = provenance.LoadWatch(1)
+    watch.read()
+    watch.read()
+    assert watch.summary()["timing_contended"] is False  # 0.1 beyond its own thread: noise, not a job
+    monkeypatch.setattr(provenance.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert provenance.LoadWatch(1, side_by_side=True).summary()["timing_contended"] is True
+
+
+def test_workers_times_threads_beyond_the_cpus_is_refused(tmp_path):
+    import pytest
+
+    from bench import grid as grids
+    from bench.harness import Execution, SweepSpec, run_sweep, usable_cpus
+    from neuspike.errors import InputError
+
+    spec = SweepSpec(name="light", grid=grids.preset("light", full=False), methods=("tfp",), axis="light")
+    cpus = usable_cpus()
+    with pytest.raises(InputError, match=f"--workers 2 x --threads {cpus} = {2 * cpus} threads exceed"):
+        run_sweep(spec, tmp_path / "out", Execution(workers=2, threads=cpus, progress=False, report=False))
+    assert not (tmp_path / "out" / "config.json").exists()

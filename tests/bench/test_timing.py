@@ -207,7 +207,8 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
     sweep_w, sweep_h = timer.sweep_resolution(results_for({"tt-mean": 20.0}))
     assert acc["resolution"].iloc[0] == f"{sweep_w}x{sweep_h}"
     assert {"32x24", f"{sweep_w}x{sweep_h}"} <= set(frame["resolution"])
-    assert set(json.loads((out / "metadata.json").read_text())["load_1min"]) == {"before", "after"}
+    meta = json.loads((out / "metadata.json").read_text())
+    assert set(meta["load_1min"]) == {"before", "max", "last"} and isinstance(meta["timing_contended"], bool)
     assert (out / "figures" / "accuracy_vs_time.png").exists() and (out / "report.pdf").read_bytes().startswith(b"%PDF")
     for name in ("config.json", "metadata.json"):
         assert (out / name).stat().st_size > 0
