@@ -13,6 +13,8 @@ import importlib
 import pkgutil
 from typing import Callable
 
+from neuspike.errors import one_line
+
 #: Modules of this package that hold shared code and register no method.
 HELPER_MODULES: frozenset[str] = frozenset({"snm_kernels", "tfstp_kernels"})
 
@@ -47,7 +49,7 @@ def register_methods(register: Callable[..., object] | None = None) -> None:
                 raise ImportError("defines no register_methods(register) and is not in HELPER_MODULES")
             hook(register)
         except Exception as exc:
-            problems.append(f"{name}: {type(exc).__name__}: {exc}")
+            problems.append(f"{name}: {one_line(exc)}")
     if problems:
         raise ImportError("some baselines could not be registered: " + "; ".join(problems))
 

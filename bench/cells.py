@@ -187,7 +187,7 @@ def load_plugins(plugins: tuple[str, ...]) -> list[str]:
         except InputError:
             raise
         except Exception as exc:
-            raise InputError(f"plug-in {plugin!r} failed to load: {type(exc).__name__}: {exc}") from exc
+            raise InputError(f"plug-in {plugin!r} failed to load: {one_line(exc)}") from exc
         _LOADED_PLUGINS[key] = module
         loaded.append(plugin)
     return loaded

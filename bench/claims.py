@@ -37,6 +37,7 @@ from bench.results import method_descriptions, tfp_windows
 #: The ``implementation`` of the NeuSpike-Net methods in their description.
 NEUSPIKE_NET_IMPLEMENTATION = "neuspike.nets.method.NeuSpikeNetMethod"
 from bench.tables import axis_label, axis_means, method_families, ok_rows, safe_name, swept_axes
+from neuspike.errors import one_line
 
 HOLDS = "holds"
 FAILS = "does not hold"
@@ -425,7 +426,7 @@ def evaluate_claims(frame: pd.DataFrame, claims: Sequence[Claim] = CLAIMS) -> pd
         try:
             status, evidence = claim.check(frame)
         except Exception as exc:  # reported in the row, never silently
-            status, evidence = UNCHECKED, f"the check failed: {type(exc).__name__}: {exc}"
+            status, evidence = UNCHECKED, f"the check failed: {one_line(exc)}"
         if status not in STATUSES:
             raise ValueError(f"claim {claim.key!r} returned status {status!r}; expected one of {STATUSES}")
         figure = f"figures/{claim.figure}_psnr_ssim.png" if claim.figure and status != UNCHECKED else ""

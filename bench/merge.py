@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 from neuspike.utils.atomic import write_bytes, write_json, write_text
 from neuspike.errors import InputError
+from neuspike.utils.jsonio import portable_path
 
 __all__ = ["merge_sweeps", "main"]
 
@@ -64,12 +65,18 @@ def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
 
 
 def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
-    """What must agree between merged folders: the sweep without its methods and weights folder."""
+    """What must agree between merged folders: the sweep without its methods and weights folder.
+
+    The device is part of it (a folder from before the device was recorded ran on the CPU); each
+    method's precision travels with its rows (see :func:`merge_sweeps`).
+    """
+    from bench.harness import LEGACY_DEVICE
+
     resolved = sweep.get("resolved", {})
     return {
         "name": sweep.get("name"), "axis": sweep.get("axis"), "grid": sweep.get("grid"),
         "sensor": sweep.get("sensor"), "harness_version": sweep.get("harness_version"),
-        "history_s": resolved.get("history_s"),
+        "history_s": resolved.get("history_s"), "device": sweep.get("device", LEGACY_DEVICE),
         # events are simulated for the history only when someone consumes them: the spike
         # recordings match either way, the event recordings only with the same history
         "events": "events" in resolved.get("modalities", []),
@@ -129,10 +136,15 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     for _, (c, _, _) in zip(folders, loaded):
         methods += [m for m in c["sweep"].get("methods", []) if m not in methods]
     sweep["methods"] = methods
-    sources = [{"folder": str(f), "methods": c["sweep"].get("methods", []), "sweep": c["sweep"],
+    # the precision each kept method computed with, from the folder its rows come from
+    precision = {m: p for f, (c, _, _) in zip(folders, loaded)
+                 for m, p in (c["sweep"].get("precision") or {}).items() if seen.get(m) == f}
+    if precision or "precision" in sweep:
+        sweep["precision"] = {m: precision[m] for m in methods if m in precision}
+    sources = [{"folder": portable_path(f), "methods": c["sweep"].get("methods", []), "sweep": c["sweep"],
                 "execution": c.get("execution")} for f, (c, _, _) in zip(folders, loaded)]
     metadata = dict(loaded[0][1])
-    metadata["merged_from"] = [{"folder": str(f), **m} for f, (_, m, _) in zip(folders, loaded)]
+    metadata["merged_from"] = [{"folder": portable_path(f), **m} for f, (_, m, _) in zip(folders, loaded)]
 
     out.mkdir(parents=True, exist_ok=True)
     _merge_images(out / "images", [f / "images" for f in folders])

@@ -35,7 +35,7 @@ import numpy as np
 
 from neuspike.conditions import EVENT_PRESETS, effect
 from neuspike.scenes import SceneSpec
-from neuspike.utils.parallel import NUMBA_AVAILABLE
+from neuspike.utils.parallel import NUMBA_AVAILABLE, set_threads
 
 FRAME_RATE_HZ = 22_500.0
 PX_PER_FRAME = 2.0
@@ -105,10 +105,7 @@ class Case:
 
 
 def _numba_threads(n: int) -> None:
-    if NUMBA_AVAILABLE:
-        import numba
-
-        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    set_threads(n, torch_pool=False)
 
 
 def _get_numba_threads() -> int:

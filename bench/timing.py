@@ -185,7 +185,7 @@ def run(args: argparse.Namespace) -> Path:
 
     acc_path = out / "accuracy_vs_time.csv"
     if results is not None:
-        joined = join_accuracy(results, timing, str(results_dir))
+        joined = join_accuracy(results, timing, portable_path(results_dir))
         write_text(acc_path, tb.to_csv_text(joined))
         print(f"accuracy against time: sweep results from {results_dir}", file=sys.stderr)
     elif acc_path.exists():

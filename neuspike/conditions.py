@@ -33,7 +33,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from neuspike.utils.checks import check_int
+from neuspike.utils.checks import check_int, check_nonnegative
 from neuspike.errors import InputError
 
 SPIKES = "spikes"
@@ -87,14 +87,7 @@ def effect(name: str, **params: float) -> Effect:
         )
     merged: dict[str, float] = {}
     for key, default in defaults.items():
-        value = params.get(key, default)
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"effect {name!r}: {key} must be a number, got {value!r}") from None
-        if not np.isfinite(value) or value < 0:
-            raise InputError(f"effect {name!r}: {key} must be finite and >= 0, got {value!r}")
-        merged[key] = value
+        merged[key] = check_nonnegative(f"effect {name!r}: {key}", params.get(key, default))
     return Effect(name, tuple(sorted(merged.items())))
 
 

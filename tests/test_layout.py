@@ -1,6 +1,7 @@
-"""The import graph of the three packages, function-level imports included (imports under
-``if TYPE_CHECKING:`` never run and are left out): no cycle, and no upward import (``neuspike`` never
-imports ``baselines`` or ``bench``; ``baselines`` never imports ``bench``)."""
+"""The import graph of the three packages, function-level imports and modules named by string (lazy
+exports, ``importlib``) included, imports under ``if TYPE_CHECKING:`` (which never run) left out: no
+cycle, and no upward import (``neuspike`` never imports ``baselines`` or ``bench``; ``baselines`` never
+imports ``bench``)."""
 
 from __future__ import annotations
 
@@ -33,7 +34,9 @@ def _imports(path: Path, modules: dict[str, Path]) -> set[str]:
     for node in ast.walk(tree):
         if id(node) in skipped:
             continue
-        if isinstance(node, ast.Import):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in modules:
+            names = [node.value]  # a module named by string (importlib, a lazy export table)
+        elif isinstance(node, ast.Import):
             names = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]

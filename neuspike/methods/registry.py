@@ -36,7 +36,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from neuspike.errors import InputError, NeuSpikeError
+from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.sample import Sample
 
 ENTRY_POINT_GROUP = "neuspike.methods"
@@ -227,7 +227,7 @@ def load_entry_points(force: bool = False) -> list[str]:
         try:
             ep.load()(register)
         except Exception as exc:  # a broken plug-in must not hide the others
-            problems.append(f"entry point {ep.name!r} ({ep.value}): {type(exc).__name__}: {exc}")
+            problems.append(f"entry point {ep.name!r} ({ep.value}): {one_line(exc)}")
     return problems
 
 

@@ -12,13 +12,13 @@ down). The view centre is ``((W - 1) / 2, (H - 1) / 2)``.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from neuspike.conditions import Effect
 from neuspike.errors import InputError
+from neuspike.utils.checks import check_finite, check_int
 
 #: Every scene kind.
 KINDS: tuple[str, ...] = ("pan", "zoom", "fan", "still", "video", "dead_leaves")
@@ -36,16 +36,7 @@ DEFAULT_FOLDER_FPS: float = 25.0
 MAX_ZOOM_EXPONENT: float = 30.0
 
 
-def _number(name: str, value: Any) -> float:
-    if isinstance(value, bool):
-        raise InputError(f"{name}: expected a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: expected a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise InputError(f"{name}: expected a finite number, got {value!r}")
-    return v
+_number = check_finite
 
 
 def _pair(name: str, value: Any) -> tuple[float, float]:
@@ -59,12 +50,7 @@ def _pair(name: str, value: Any) -> tuple[float, float]:
 
 
 def _whole(name: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) and not hasattr(value, "__index__"):
-        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
-    v = int(value.__index__())
-    if v < minimum:
-        raise InputError(f"{name}: expected a whole number >= {minimum}, got {value!r}")
-    return v
+    return check_int(name, value, minimum=minimum)
 
 
 def _size(value: Any) -> tuple[int, int]:

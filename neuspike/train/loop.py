@@ -30,6 +30,7 @@ import torch
 from neuspike.errors import InputError
 from neuspike.train import checkpoint as ck
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
+from neuspike.utils.checks import check_positive_int
 from neuspike.utils.parallel import set_threads
 
 __all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
@@ -176,8 +177,8 @@ class Trainer:
         after ``max_minutes``; ``snapshot_every`` also keeps every N-th step's weights under
         ``out_dir/snapshots/step-NNNNN/``; ``simulate_only`` builds the data and stops."""
         spec = self.spec
-        if snapshot_every is not None and (isinstance(snapshot_every, bool) or snapshot_every < 1):
-            raise InputError(f"snapshot_every: expected a positive step count, got {snapshot_every}")
+        if snapshot_every is not None:
+            snapshot_every = check_positive_int("snapshot_every", snapshot_every)
         if max_minutes is not None and not max_minutes > 0:
             raise InputError(f"max_minutes: expected a positive number, got {max_minutes}")
         last = spec.steps if until is None else min(int(until), spec.steps)

@@ -31,6 +31,19 @@ def check_finite_nonnegative(name: str, array: np.ndarray) -> None:
         raise InputError(f"{name}: expected values >= 0, got a minimum of {float(lo)!r}")
 
 
+def check_finite(name: str, value: Any) -> float:
+    """Return ``value`` as a float, raising unless it is a finite number (``bool`` is refused)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name}: expected a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise InputError(f"{name}: expected a finite number, got {value!r}")
+    return v
+
+
 def check_positive(name: str, value: Any) -> float:
     """Return ``value`` as a float, raising unless it is finite and > 0."""
     try:

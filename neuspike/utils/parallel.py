@@ -102,9 +102,10 @@ def resolve_backend(backend: Any, *, compiled: bool | None = None, reference: st
     return "numba"
 
 
-def set_threads(threads: int) -> int:
+def set_threads(threads: int, *, torch_pool: bool = True) -> int:
     """Give numba's pool and torch's intra-op pool ``threads`` threads each (numba: at most the
-    count it was started with); return torch's count.
+    count it was started with); return the count set (torch's, or numba's with ``torch_pool=False``,
+    which leaves torch alone for work that runs only numba kernels).
 
     The one place that pins threads, in one order: numba first, because starting its OpenMP
     threading layer resets the OpenMP pool size that torch reads. A pool already at the count is
@@ -117,6 +118,8 @@ def set_threads(threads: int) -> int:
         wanted = min(threads, numba.config.NUMBA_NUM_THREADS)
         if numba.get_num_threads() != wanted:
             numba.set_num_threads(wanted)
+    if not torch_pool:
+        return wanted if NUMBA_AVAILABLE else 1
     import torch
 
     if torch.get_num_threads() != threads:

@@ -20,7 +20,7 @@ import numpy as np
 
 from neuspike.utils.atomic import publish
 from neuspike.errors import InputError, SourceError
-from neuspike.formats.images import to_uint8
+from neuspike.formats.images import encode_png, to_uint8
 
 __all__ = [
     "label_image",
@@ -225,10 +225,11 @@ class FrameFolder:
     def write(self, image: np.ndarray) -> None:
         name = f"frame_{self.count:06d}"
         if self.png:
-            import cv2
-
-            if not cv2.imwrite(str(self.tmp / f"{name}.png"), to_uint8(image, clip=True)):
-                raise SourceError(f"{self.path}: could not write {name}.png (is the disk full or a file size limit set?)")
+            try:  # the folder is published whole by close(); its files need no rename of their own
+                (self.tmp / f"{name}.png").write_bytes(encode_png(image, clip=True))
+            except OSError as exc:
+                raise SourceError(f"{self.path}: could not write {name}.png ({exc.strerror or exc}; is the disk full "
+                                  "or a file size limit set?)") from None
         if self.npy:
             np.save(self.tmp / f"{name}.npy", np.asarray(image, dtype=np.float32))
         self.count += 1

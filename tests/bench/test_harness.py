@@ -443,6 +443,20 @@ def test_merged_sweeps_equal_one_sweep_of_all_methods(plugin, tmp_path):
         merge_sweeps(tmp_path / "y", [tmp_path / "a", tmp_path / "c"])
     with pytest.raises(InputError, match="not a finished sweep"):
         merge_sweeps(tmp_path / "y", [tmp_path / "a", tmp_path / "nothing"])
+    # results computed on another device are not the same sweep (a folder without the field ran on the CPU)
+    import shutil
+
+    shutil.copytree(tmp_path / "b", tmp_path / "b-gpu")
+    gpu = json.loads((tmp_path / "b-gpu" / "config.json").read_text())
+    gpu["sweep"]["device"] = "cuda:0"
+    (tmp_path / "b-gpu" / "config.json").write_text(json.dumps(gpu))
+    with pytest.raises(InputError, match="different sweep.*device"):
+        merge_sweeps(tmp_path / "y", [tmp_path / "a", tmp_path / "b-gpu"])
+    # each method's precision comes with its rows
+    gpu["sweep"]["device"], gpu["sweep"]["precision"] = "cpu", {"ht-mean-x2": "bfloat16"}
+    (tmp_path / "b-gpu" / "config.json").write_text(json.dumps(gpu))
+    merge_sweeps(tmp_path / "z", [tmp_path / "a", tmp_path / "b-gpu"])
+    assert json.loads((tmp_path / "z" / "config.json").read_text())["sweep"]["precision"] == {"ht-mean-x2": "bfloat16"}
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
 
 

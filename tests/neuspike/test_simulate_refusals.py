@@ -29,7 +29,10 @@ def no_simulation(monkeypatch):
         raise AssertionError("the simulation started")
 
     monkeypatch.setattr(window_module, "simulate_window", forbidden)
+    import neuspike.simulation.cell as cell
     import neuspike.simulation.writing as writing
+
+    monkeypatch.setattr(cell, "simulate_window", forbidden)
 
     monkeypatch.setattr(writing, "simulate_sequence", forbidden)
 

@@ -76,6 +76,8 @@ def test_a_kill_during_a_rerun_leaves_the_old_folder_whole(finished, tmp_path):
             assert time.monotonic() < deadline
             time.sleep(0.05)
         time.sleep(0.5)  # several frames into the rerun: new videos and frames are being written
+        staged = [p for p in out.parent.glob(f".{out.name}.*.staging") if any(p.rglob("*"))]
+        assert staged, "the rerun had not started writing: the kill would test nothing"
         child.send_signal(signal.SIGKILL)
     finally:
         child.communicate()
