@@ -30,3 +30,18 @@ def one_torch_thread():
 def rng() -> np.random.Generator:
     """A fixed generator for tests that draw random data (modules may override with their own seed)."""
     return np.random.default_rng(1234)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _no_cache_in_the_users_home(tmp_path_factory):
+    """Measured precisions are remembered in ``$NEUSPIKE_CACHE``: never in the home folder of whoever
+    runs the tests (a machine with native bfloat16 measures its networks when they are created)."""
+    import os
+
+    previous = os.environ.get("NEUSPIKE_CACHE")
+    os.environ["NEUSPIKE_CACHE"] = str(tmp_path_factory.mktemp("neuspike-cache"))
+    yield
+    if previous is None:
+        os.environ.pop("NEUSPIKE_CACHE", None)
+    else:
+        os.environ["NEUSPIKE_CACHE"] = previous

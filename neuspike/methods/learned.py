@@ -16,10 +16,13 @@ base owns what all of them share, written once:
   safetensors, published ``.pt`` files are read weights-only by the subclass that needs them.
 * **device**: ``"cpu"`` by default; any torch device string the machine has (``"cuda"``,
   ``"cuda:1"``) when asked for. Nothing is ever placed on a GPU unasked.
-* **precision** (:func:`resolve_precision`): ``"auto"`` picks bfloat16 where the device computes it
-  natively (on a CPU: AVX512-BF16 or AMX instructions, as torch reports them) and float32 elsewhere;
-  emulated bfloat16 is slower than float32. bfloat16 runs the module under autocast; recurrent states
-  stay float32 where the module keeps them so.
+* **precision**: ``"auto"`` is float32 where the device cannot compute bfloat16 natively (a CPU
+  without AVX512-BF16 or AMX instructions, as torch reports them: emulated bfloat16 is always
+  slower); where it can, one step of the module is timed in both and bfloat16 is chosen only when it
+  is faster (:mod:`neuspike.methods.precision`; measured once per machine and module, remembered).
+  The choice is ``params["precision"]``, so it appears in ``describe()``, in ``results.csv`` and in
+  a sweep's identity. bfloat16 runs the module under autocast; recurrent states stay float32 where
+  the module keeps them so.
 * **encoding**: :meth:`LearnedMethod.encode` turns a sample into a list of *steps*, each a tuple of
   tensors (1, C, H, W) that is one call of the module. A feed-forward network has one step; a
   recurrent one has one per event window, its state carried from step to step and reset at the start
@@ -138,10 +141,14 @@ class LearnedMethod(Method):
                  weights_dir: str | os.PathLike | None = None, weights_subdirs: Sequence[str] = (),
                  device: str | torch.device = "cpu", precision: str = "auto", **params: Any) -> None:
         dev = resolve_device(device)
-        precision = resolve_precision(precision, dev)
+        # "auto" resolved to bfloat16 only says the device can compute it: a measured step decides
+        measure = precision == "auto" and resolve_precision(precision, dev) == "bfloat16"
+        precision = "float32" if measure else resolve_precision(precision, dev)
         path = None if weights_file is None else resolve_weights(str(weights_file), weights_dir,
                                                                   subdirs=tuple(weights_subdirs))
         super().__init__(name, weights_file=weights_file, precision=precision, **params)
+        #: What a measured "auto" precision rests on (None when it was not measured).
+        self.precision_measurement: dict[str, Any] | None = None
         self.device = dev
         self.weights_path: Path | None = path
         self.weights_sha256: str | None = None
@@ -154,6 +161,8 @@ class LearnedMethod(Method):
             check_card(path, self.weights_sha256)
             self.weights_layout = self.load_weights(module, path)
         self.module: nn.Module = module.to(dev).eval()
+        if measure:
+            self._measure_precision()
 
     @classmethod
     def for_training(cls, name: str | None = None, *, device: str | torch.device = "cpu",
@@ -165,6 +174,31 @@ class LearnedMethod(Method):
         seeds it). The module is left in eval mode: call ``method.module.train()`` to train it.
         """
         return cls(name, weights_file=None, device=device, precision="float32", **params)
+
+    def _measure_precision(self) -> None:
+        """Set ``params["precision"]`` by timing one step in float32 and in bfloat16
+        (:func:`neuspike.methods.precision.choose_precision`); float32 when the step cannot be probed."""
+        from neuspike.methods.precision import choose_precision, module_identity, probe_sample
+
+        try:
+            inputs = tuple(t.to(self.device) for t in self.encode(probe_sample())[0])
+        except Exception as exc:  # a method that cannot encode the synthetic sample: keep float32
+            self.precision_measurement = {"choice": "float32", "error": f"no probe step: {type(exc).__name__}"}
+            return
+
+        def step(precision: str) -> None:
+            with torch.inference_mode(), contextlib.ExitStack() as stack:
+                if precision == "bfloat16":
+                    stack.enter_context(torch.autocast(self.device.type, dtype=torch.bfloat16))
+                out = self.module(*inputs, None) if self.recurrent else self.module(*inputs)
+                if self.device.type == "cuda":
+                    torch.cuda.synchronize(self.device)
+                return out
+
+        choice, record = choose_precision(module_identity(type(self), self.params), str(self.device),
+                                          torch.get_num_threads(), step)
+        self.params["precision"] = choice
+        self.precision_measurement = record
 
     # -- what a subclass provides ----------------------------------------------------------------
 

@@ -281,10 +281,15 @@ def test_module_has_the_published_parameter_count():
 
 
 @needs_weights
-@pytest.mark.parametrize("native, expected", [(True, "bfloat16"), (False, "float32")])
-def test_auto_precision_follows_the_cpu_and_is_recorded(monkeypatch, native, expected):
+@pytest.mark.parametrize("native, bf16_ms, expected", [(True, 50.0, "bfloat16"), (True, 150.0, "float32"),
+                                                       (False, None, "float32")])
+def test_auto_precision_follows_a_measured_step_and_is_recorded(monkeypatch, tmp_path, native, bf16_ms, expected):
     import neuspike.methods.learned as learned
+    from neuspike.methods import precision
 
+    monkeypatch.setenv("NEUSPIKE_CACHE", str(tmp_path))
     monkeypatch.setattr(learned, "native_bfloat16", lambda: native)
+    answers = iter([100.0, bf16_ms])  # float32 is timed first
+    monkeypatch.setattr(precision, "_median_ms", lambda step: next(answers))
     method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")
     assert method.params["precision"] == expected
