@@ -584,6 +584,23 @@ def timing_markdown(timing: pd.DataFrame, threads: Any = None, machine: str = ""
         markdown_table(["method", "family", "parameters", *resolutions], rows,
                        ["l", "l", "r"] + ["r"] * len(resolutions)),
     ]
+    flops = ("gflop_per_step", "gflop_s", "flop_bound_ms", "matmul_gflop_s", "ms_per_frame")
+    counted = timing.iloc[:0]
+    if len(timing) and all(c in timing for c in flops):  # a timing.csv read back keeps empty cells as text
+        numeric = timing.assign(**{c: pd.to_numeric(timing[c], errors="coerce") for c in flops})
+        counted = numeric[numeric["gflop_per_step"].notna()]
+    if len(counted):
+        ref = float(counted["matmul_gflop_s"].iloc[0])
+        lrows = [[r.method, r.resolution, f"{r.gflop_per_step:.2f}", fmt(r.ms_per_frame, "ms"), fmt(r.flop_bound_ms, "ms"),
+                  f"{r.gflop_s:.1f}", f"{100.0 * r.gflop_s / r.matmul_gflop_s:.0f} %"] for r in counted.itertuples()]
+        parts.append("\nThe networks against this machine's limit: GFLOP per network step (counted by torch's FLOP "
+                     "counter: convolutions and matrix products), the measured ms per frame, the FLOP-bound time "
+                     f"(GFLOP at the rate of a float32 matrix product measured in the same run: {ref:.1f} GFLOP/s) "
+                     "and the rate achieved (a feed-forward method's time includes building its input "
+                     "representations):\n\n"
+                     + markdown_table(["method", "resolution", "GFLOP / step", "ms / frame", "FLOP-bound ms",
+                                       "GFLOP/s", "of the matmul rate"], lrows,
+                                      ["l", "l", "r", "r", "r", "r", "r"]))
     bad = timing[timing["status"] != OK].drop_duplicates(["method", "error"]) if len(timing) else timing
     if len(bad):
         parts.append("\nNot timed:\n\n" + "".join(f"- {r.method} ({r.status}): {r.error}\n" for r in bad.itertuples()))

@@ -34,7 +34,51 @@ LIGHT, MOTION, PLANES = 0.25, 128, 256
 
 TIMING_COLUMNS = ("method", "family", "inputs", "resolution", "width", "height", "status", "error", "threads",
                   "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms", "q3_ms", "steps",
-                  "ms_per_frame", "min_frame_ms", "max_frame_ms")
+                  "ms_per_frame", "min_frame_ms", "max_frame_ms", "gflop_per_step", "gflop_s", "flop_bound_ms",
+                  "matmul_gflop_s")
+#: Side of the square float32 matrix product whose rate is the machine's reference (GFLOP/s).
+MATMUL_SIDE = 2048
+
+
+def count_module_gflop(module: Any, inputs: Sequence[Any], *, recurrent: bool = False) -> float:
+    """Floating-point operations (GFLOP) of one call of ``module`` on ``inputs``, counted by torch's
+    FLOP counter (:class:`torch.utils.flop_counter.FlopCounterMode`: 2 per multiply-add of every
+    convolution and matrix product; element-wise work is not counted), in float32. A recurrent
+    module is called from an empty state."""
+    import torch
+    from torch.utils.flop_counter import FlopCounterMode
+
+    counter = FlopCounterMode(display=False)
+    with torch.inference_mode(), counter:
+        module(*inputs, None) if recurrent else module(*inputs)
+    return counter.get_total_flops() / 1e9
+
+
+def step_gflop(method: Any, sample: Any) -> float | None:
+    """GFLOP of one network step of a learned method on ``sample`` (its first encoded step); ``None``
+    for a method without a torch module."""
+    module = getattr(method, "module", None)
+    if module is None or not hasattr(method, "encode"):
+        return None
+    steps = method.encode(sample)
+    if not steps:
+        return None
+    inputs = tuple(t.to(method.device) for t in steps[0])
+    return count_module_gflop(module, inputs, recurrent=bool(getattr(method, "recurrent", False)))
+
+
+def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3) -> float:
+    """The rate (GFLOP/s) of a ``side`` x ``side`` float32 matrix product on the CPU with torch's
+    current threads: the reference a network's achieved rate is read against."""
+    import torch
+
+    gen = torch.Generator().manual_seed(0)
+    a = torch.rand(side, side, generator=gen)
+    b = torch.rand(side, side, generator=gen)
+    out = torch.empty(side, side)
+    stats = time_callable(lambda: torch.mm(a, b, out=out), repeats=repeats, warmup=1)
+    median_s = float(np.median(stats.samples_ms)) / 1000.0
+    return 2.0 * side**3 / median_s / 1e9
 
 
 # ----------------------------------------------------------------------------------------------
@@ -264,6 +308,14 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
     warmup = check_count("warmup", warmup, 0)
     created = create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for name, (method, _) in created.items() if method is not None for m in method.inputs}
+    learned = any(getattr(method, "module", None) is not None for method, _ in created.values())
+    reference = None
+    if learned:
+        if threads is not None:
+            set_threads(threads)
+        reference = matmul_gflop_s()
+        if log:
+            log(f"reference: a {MATMUL_SIDE}x{MATMUL_SIDE} float32 matrix product runs at {reference:.1f} GFLOP/s")
     rows = []
     for width, height in sizes:
         res = f"{width}x{height}"
@@ -287,6 +339,11 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
                 try:
                     timing = time_method(method, sample, repeats=repeats, warmup=warmup)
                     row.update(status="ok", **timing.row())
+                    gflop = step_gflop(method, sample)
+                    if gflop is not None and reference:
+                        # recurrent methods: ms per network step; others: the whole call, encoding included
+                        row.update(gflop_per_step=gflop, gflop_s=gflop / (row["ms_per_frame"] / 1000.0),
+                                   flop_bound_ms=gflop / reference * 1000.0, matmul_gflop_s=reference)
                 except Exception as exc:
                     row.update(status="error", error=one_line(exc))
             if log:

@@ -254,3 +254,19 @@ def test_timing_command_refuses_before_writing_anything(tmp_path, capsys, method
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert code == 2 and len(err) == 1 and cause in err[0], err
     assert not (tmp_path / "t" / "config.json").exists()
+
+
+def test_flops_are_counted_against_a_closed_form_and_a_network_is_read_against_the_matmul_rate():
+    import torch
+
+    # a 3x3 convolution, 2 -> 3 channels, on 8x8: 2 FLOP per multiply-add, 3*8*8 outputs of 2*3*3 terms
+    conv = torch.nn.Conv2d(2, 3, 3, padding=1, bias=False)
+    assert timer.count_module_gflop(conv, (torch.zeros(1, 2, 8, 8),)) * 1e9 == 2 * (3 * 8 * 8) * (2 * 3 * 3)
+    frame = timer.measure(["firenet-sim", "tfi"], [(32, 24)], repeats=1, warmup=0, history_windows=1)
+    net, classical = frame.set_index("method").loc["firenet-sim"], frame.set_index("method").loc["tfi"]
+    assert net["gflop_per_step"] > 0 and net["matmul_gflop_s"] > 0
+    assert net["flop_bound_ms"] == pytest.approx(net["gflop_per_step"] / net["matmul_gflop_s"] * 1000)
+    assert net["gflop_s"] == pytest.approx(net["gflop_per_step"] / net["ms_per_frame"] * 1000)
+    assert math.isnan(classical["gflop_per_step"])  # no network, nothing counted
+    md = tb.timing_markdown(frame)
+    assert "FLOP-bound ms" in md and "| firenet-sim | 32x24 |" in md
