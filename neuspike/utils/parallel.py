@@ -108,8 +108,8 @@ def set_threads(threads: int, *, torch_pool: bool = True) -> int:
     which leaves torch alone for work that runs only numba kernels).
 
     The one place that pins threads, in one order: numba first, because starting its OpenMP
-    threading layer resets the OpenMP pool size that torch reads. A pool already at the count is
-    left alone (setting numba's is not free once its layer runs).
+    threading layer resets the OpenMP pool size that torch reads. numba's pool is left alone when
+    already at the count (setting it is not free once its layer runs); torch's is always set.
     """
     threads = check_positive_int("threads", threads)
     if NUMBA_AVAILABLE:
@@ -122,6 +122,7 @@ def set_threads(threads: int, *, torch_pool: bool = True) -> int:
         return wanted if NUMBA_AVAILABLE else 1
     import torch
 
-    if torch.get_num_threads() != threads:
-        torch.set_num_threads(threads)
+    # always, even when torch already reports the count: a numba OpenMP region started since can
+    # have shrunk the pool that torch's own count no longer describes
+    torch.set_num_threads(threads)
     return int(torch.get_num_threads())
