@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from neuspike.utils.jsonio import portable_path
+from neuspike.utils.resources import cpu_model
 
 #: Distributions whose versions are recorded (absent ones are recorded as ``None``).
 PACKAGES = (
@@ -61,17 +62,6 @@ def package_versions() -> dict[str, str | None]:
     return out
 
 
-def _cpu_model() -> str | None:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or None
-
-
 def _memory_bytes() -> int | None:
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
@@ -88,7 +78,7 @@ def machine() -> dict[str, Any]:
         "host": platform.node(),
         "system": platform.platform(),
         "machine": platform.machine(),
-        "cpu_model": _cpu_model(),
+        "cpu_model": cpu_model(),
         "logical_cpus": os.cpu_count(),
         "usable_cpus": usable,
         "memory_bytes": _memory_bytes(),

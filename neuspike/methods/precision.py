@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 from neuspike.utils.atomic import write_json
 from neuspike.utils.jsonio import canonical_json, stable_hash
+from neuspike.utils.resources import cpu_model
 
 __all__ = ["BF16_MARGIN", "cache_path", "choose_precision", "machine_key"]
 
@@ -40,22 +41,11 @@ def cache_path() -> Path:
     return Path(root) / "precision.json"
 
 
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.lower().startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def machine_key(device: str, threads: int) -> dict[str, Any]:
     """What a measurement depends on besides the module: the CPU model, torch, the device, the threads."""
     import torch
 
-    return {"cpu": _cpu_model(), "torch": torch.__version__, "device": device, "threads": int(threads)}
+    return {"cpu": cpu_model() or platform.machine(), "torch": torch.__version__, "device": device, "threads": int(threads)}
 
 
 def _median_ms(step: Callable[[], Any]) -> float:

@@ -1,4 +1,5 @@
-"""Whether requested work fits this machine: memory, free disk, the file size limit.
+"""Whether requested work fits this machine: memory, free disk, the file size limit; and what the
+machine is (:func:`cpu_model`).
 
 Commands estimate what a job needs before starting it and refuse, in one line naming the sizes,
 what cannot fit, rather than failing partway (an allocation error after minutes of work, a disk
@@ -8,12 +9,26 @@ filled with temporary files, ``OSError: File too large``).
 from __future__ import annotations
 
 import os
+import platform
 import shutil
 from pathlib import Path
 
 from neuspike.errors import InputError
 
-__all__ = ["available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "format_bytes"]
+__all__ = ["available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "cpu_model",
+           "format_bytes"]
+
+
+def cpu_model() -> str | None:
+    """The CPU's model name (``/proc/cpuinfo``, else what the platform says; ``None`` if nothing)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
 
 _UNITS = ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB")
 
