@@ -60,6 +60,7 @@ from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.checks import check_positive_int
+from neuspike.utils.resources import usable_cpus
 from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
@@ -459,11 +460,6 @@ def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[st
         write_image_png(image_path(images_dir, cell.scene.name, axis, value, name), image)
 
 
-def usable_cpus() -> int:
-    """The CPUs this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def _check_oversubscription(workers: int, threads: int) -> None:
     """Refuse local workers x threads beyond the usable CPUs: oversubscribed threads wait on each other
     at every small operation, and the timings would measure that instead of the methods."""
@@ -515,12 +511,12 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     if threads is not None:
         threads = check_positive_int("threads", threads)
     if isinstance(executor, str):
-        if executor == "local" and threads is not None:
-            _check_oversubscription(check_positive_int("workers", execution.workers), threads)
         executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
     remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
     if threads is None:
         threads = 1 if remote else max(1, usable_cpus() // max(1, executor.workers))
+    if not remote:  # workers on this machine, with the threads given or the default
+        _check_oversubscription(executor.workers, threads)
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
     setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
 

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,6 +50,7 @@ import numpy as np
 
 from neuspike.errors import InputError, one_line
 from neuspike.utils.parallel import set_threads
+from neuspike.utils.resources import usable_cpus
 
 WIDTH, HEIGHT = 400, 250
 REFERENCE_PLANES = 41
@@ -196,10 +196,10 @@ def pin_threads(threads: int) -> dict[str, int]:
 
 def load_average() -> float:
     """The 1-minute load average (NaN where the system has none)."""
-    try:
-        return float(os.getloadavg()[0])
-    except (AttributeError, OSError):
-        return math.nan
+    from bench.provenance import load_1min
+
+    load = load_1min()
+    return math.nan if load is None else load
 
 
 def judge(frame: pd.DataFrame) -> pd.DataFrame:
@@ -366,13 +366,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _usable_cpus() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - platforms without affinity
-        return max(1, os.cpu_count() or 1)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from bench import tables as tb
@@ -389,7 +382,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         weights = weights_dir_from_env(args.weights)
         if weights is not None and not weights.is_dir():
             raise InputError(f"weights folder {str(weights)!r} is not a folder")
-        pin_threads(timer.check_count("--threads", args.threads, 1) if args.threads is not None else _usable_cpus())
+        pin_threads(timer.check_count("--threads", args.threads, 1) if args.threads is not None else usable_cpus())
         names = timer.method_names(args.methods)
         frame = measure(names, repeats=args.repeats, warmup=args.warmup, weights_dir=weights,
                         log=lambda s: print(s, file=sys.stderr, flush=True))

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from neuspike.utils.jsonio import portable_path
-from neuspike.utils.resources import cpu_model
+from neuspike.utils.resources import cpu_model, usable_cpus
 
 #: Distributions whose versions are recorded (absent ones are recorded as ``None``).
 PACKAGES = (
@@ -70,10 +70,7 @@ def _memory_bytes() -> int | None:
 
 
 def machine() -> dict[str, Any]:
-    try:
-        usable = len(os.sched_getaffinity(0))
-    except AttributeError:
-        usable = os.cpu_count()
+    usable = usable_cpus()
     return {
         "host": platform.node(),
         "system": platform.platform(),

@@ -16,6 +16,7 @@ by default ``~/.cache/neuspike/precision.json``), so each module is measured onc
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import statistics
@@ -81,8 +82,6 @@ def choose_precision(module_key: dict[str, Any], device: str, threads: int,
     key = stable_hash({"machine": machine_key(device, threads), "module": module_key})
     path = cache_path()
     try:
-        import json
-
         known = json.loads(path.read_text()) if path.is_file() else {}
         if not isinstance(known, dict):
             known = {}

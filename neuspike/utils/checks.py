@@ -31,14 +31,19 @@ def check_finite_nonnegative(name: str, array: np.ndarray) -> None:
         raise InputError(f"{name}: expected values >= 0, got a minimum of {float(lo)!r}")
 
 
+def _float(name: str, value: Any, what: str) -> float:
+    """``value`` as a float, or :class:`InputError` saying ``expected {what}``."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected {what}, got {value!r}") from None
+
+
 def check_finite(name: str, value: Any) -> float:
     """Return ``value`` as a float, raising unless it is a finite number (``bool`` is refused)."""
     if isinstance(value, (bool, np.bool_)):
         raise InputError(f"{name}: expected a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: expected a number, got {value!r}") from None
+    v = _float(name, value, "a number")
     if not np.isfinite(v):
         raise InputError(f"{name}: expected a finite number, got {value!r}")
     return v
@@ -46,10 +51,7 @@ def check_finite(name: str, value: Any) -> float:
 
 def check_positive(name: str, value: Any) -> float:
     """Return ``value`` as a float, raising unless it is finite and > 0."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: expected a positive number, got {value!r}") from None
+    v = _float(name, value, "a positive number")
     if not np.isfinite(v) or v <= 0:
         raise InputError(f"{name}: expected a positive finite number, got {value!r}")
     return v
@@ -57,10 +59,7 @@ def check_positive(name: str, value: Any) -> float:
 
 def check_nonnegative(name: str, value: Any) -> float:
     """Return ``value`` as a float, raising unless it is finite and >= 0."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}: expected a number >= 0, got {value!r}") from None
+    v = _float(name, value, "a number >= 0")
     if not np.isfinite(v) or v < 0:
         raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
     return v

@@ -16,7 +16,15 @@ from pathlib import Path
 from neuspike.errors import InputError
 
 __all__ = ["available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "cpu_model",
-           "format_bytes"]
+           "format_bytes", "usable_cpus"]
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on (its affinity where the system reports one), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - platforms without affinity
+        return max(1, os.cpu_count() or 1)
 
 
 def cpu_model() -> str | None:

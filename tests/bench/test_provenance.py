@@ -84,7 +84,8 @@ def test_workers_times_threads_beyond_the_cpus_is_refused(tmp_path):
     import pytest
 
     from bench import grid as grids
-    from bench.harness import Execution, SweepSpec, run_sweep, usable_cpus
+    from bench.harness import Execution, SweepSpec, run_sweep
+    from neuspike.utils.resources import usable_cpus
     from neuspike.errors import InputError
 
     spec = SweepSpec(name="light", grid=grids.preset("light", full=False), methods=("tfp",), axis="light")
