@@ -93,3 +93,18 @@ def test_workers_times_threads_beyond_the_cpus_is_refused(tmp_path):
     with pytest.raises(InputError, match=f"--workers 2 x --threads {cpus} = {2 * cpus} threads exceed"):
         run_sweep(spec, tmp_path / "out", Execution(workers=2, threads=cpus, progress=False, report=False))
     assert not (tmp_path / "out" / "config.json").exists()
+
+
+def test_more_workers_than_cpus_is_refused_with_the_default_threads(tmp_path):
+    import pytest
+
+    from bench import grid as grids
+    from bench.harness import Execution, SweepSpec, run_sweep
+    from neuspike.errors import InputError
+    from neuspike.utils.resources import usable_cpus
+
+    spec = SweepSpec(name="light", grid=grids.preset("light", full=False), methods=("tfp",), axis="light")
+    workers = usable_cpus() + 1
+    with pytest.raises(InputError, match=f"--workers {workers} x --threads 1 = {workers} threads exceed"):
+        run_sweep(spec, tmp_path / "out", Execution(workers=workers, progress=False, report=False))
+    assert not (tmp_path / "out" / "config.json").exists()
