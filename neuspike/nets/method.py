@@ -16,16 +16,18 @@ from torch import nn
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
-from neuspike.nets.network import NeuSpikeNet
+from neuspike.nets.network import HEADS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
                                            spike_gain, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 
-__all__ = ["ARCHITECTURE_PARAMS", "NeuSpikeNetMethod"]
+__all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "NeuSpikeNetMethod"]
 
 #: The parameters that define the module and its inputs (recorded in the weights card and checked).
-ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only")
+ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head")
+#: What an architecture parameter means when a weights card (written before it existed) lacks it.
+CARD_DEFAULTS = {"head": "tanh"}
 
 
 def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
@@ -41,6 +43,8 @@ def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError(f"fusion: expected one of {FUSIONS}, got {p['fusion']!r}")
     if not isinstance(p["spike_only"], bool):
         raise InputError(f"spike_only: expected True or False, got {p['spike_only']!r}")
+    if p["head"] not in HEADS:
+        raise InputError(f"head: expected one of {HEADS}, got {p['head']!r}")
     return p
 
 
@@ -58,6 +62,10 @@ class NeuSpikeNetMethod(LearnedMethod):
     event_skip_weight : float
         ``w`` of the input-level skip (1 on simulated data; the paper uses the maximum of the event
         integration on real data).
+    head : str
+        The prediction head (:data:`neuspike.nets.network.HEADS`): ``"tanh"`` (the paper's) or
+        ``"support"`` (a per-pixel choice among the spike representation's radiance estimates plus a
+        correction, which keeps the absolute scale).
     **learned
         :class:`~neuspike.methods.learned.LearnedMethod`'s arguments (weights, device, precision).
     """
@@ -65,13 +73,14 @@ class NeuSpikeNetMethod(LearnedMethod):
     inputs = frozenset({"spikes", "events"})
 
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
-                 fusion: str, spike_only: bool, event_skip_weight: float = 1.0, **learned: Any) -> None:
+                 fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
+                 **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
-                           fusion=fusion, spike_only=spike_only))
+                           fusion=fusion, spike_only=spike_only, head=head))
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
-                         event_skip_weight=float(event_skip_weight), **learned)
+                         event_skip_weight=float(event_skip_weight), head=head, **learned)
 
     # -- LearnedMethod ----------------------------------------------------------------------------
 
@@ -79,7 +88,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         """An untrained module for this variant."""
         p = self.params
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
-                           event_skip_weight=float(p.get("event_skip_weight", 1.0)))
+                           event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W).
@@ -113,7 +122,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         trained = (card or {}).get("model", {}).get("params")
         if trained is not None:
             ours = {k: self.params[k] for k in ARCHITECTURE_PARAMS}
-            theirs = {k: trained.get(k) for k in ARCHITECTURE_PARAMS}
+            theirs = {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in ARCHITECTURE_PARAMS}
             if ours != theirs:
                 raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")
         return super().load_weights(module, path)

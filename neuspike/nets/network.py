@@ -9,7 +9,20 @@ Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back
 * three decoders, each a 3x3 transposed convolution (stride 2) + instance norm + ReLU, to 128, 64
   and 32 channels; after each, the skip of that level is concatenated: F(x_t^2, x_m^2),
   F(x_t^1, x_m^1), and at the input level x_t^0 + w * x_m^0;
-* prediction: 3x3 convolution of the 64 channels to 1, then ``(tanh + 1) / 2`` in [0, 1].
+* prediction (``head``):
+
+  - ``"tanh"`` (the paper's): 3x3 convolution of the 64 channels to 1, then ``(tanh + 1) / 2`` in
+    [0, 1]. Instance normalisation removes each feature map's scale, so the absolute intensity
+    reaches the output only through the input-level skip; networks with this head compress contrast
+    (a gain error).
+  - ``"support"``: 3x3 convolution of the 64 channels to ``1 + in_channels``: a per-pixel softmax
+    over the spike representation's channels (each a radiance estimate: rates over 16-plane groups
+    and interval estimates at their centres) chooses the temporal support, and the first channel
+    adds a correction: ``sum_i softmax(a)_i x_t,i^0 + c``. The weighted sum is a convex combination
+    of unbiased estimates, so the absolute scale is the data's and is kept at any light; with the
+    convolution's weights at zero the network is the mean of all channels (TFP and TFI over the
+    window). The output is not bounded: the method clamps it to [0, 1], and training scores it
+    unclamped.
 
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
@@ -27,13 +40,15 @@ from neuspike.errors import InputError
 from neuspike.nets.fusion import make_fusion
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
-__all__ = ["NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
+__all__ = ["HEADS", "NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
 PAPER_PARAMETERS = 5_985_000
 ENCODER_CHANNELS = (64, 128, 256)
 DECODER_CHANNELS = (128, 64, 32)
 MULTIPLE = 8
+#: The prediction heads (module docstring).
+HEADS = ("tanh", "support")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -73,13 +88,18 @@ class NeuSpikeNet(nn.Module):
         The texture path and decoders only.
     event_skip_weight : float
         ``w`` of the input-level skip ``x_t^0 + w * x_m^0`` (1 on simulated data).
+    head : str
+        The prediction head, one of :data:`HEADS`.
     """
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
-                 event_skip_weight: float = 1.0) -> None:
+                 event_skip_weight: float = 1.0, head: str = "tanh") -> None:
         super().__init__()
+        if head not in HEADS:
+            raise InputError(f"NeuSpikeNet: head must be one of {HEADS}, got {head!r}")
         self.in_channels = in_channels
         self.spike_only = spike_only
+        self.head = head
         self.event_skip_weight = float(event_skip_weight)
         self.texture = _Encoder(in_channels)
         if not spike_only:
@@ -90,10 +110,14 @@ class NeuSpikeNet(nn.Module):
         self.up1 = UpConvNormReLU(ENCODER_CHANNELS[2], DECODER_CHANNELS[0])
         self.up2 = UpConvNormReLU(DECODER_CHANNELS[0] + ENCODER_CHANNELS[1], DECODER_CHANNELS[1])
         self.up3 = UpConvNormReLU(DECODER_CHANNELS[1] + ENCODER_CHANNELS[0], DECODER_CHANNELS[2])
-        self.predict = nn.Conv2d(DECODER_CHANNELS[2] + in_channels, 1, 3, padding=1)
+        outputs = 1 if head == "tanh" else 1 + in_channels
+        self.predict = nn.Conv2d(DECODER_CHANNELS[2] + in_channels, outputs, 3, padding=1)
+        if head == "support":  # start as the mean of every estimate, no correction
+            nn.init.zeros_(self.predict.weight)
+            nn.init.zeros_(self.predict.bias)
 
     def forward(self, spikes: torch.Tensor, events: torch.Tensor | None = None) -> torch.Tensor:
-        """spikes, events: (B, 32, H, W) -> image (B, 1, H, W) in [0, 1].
+        """spikes, events: (B, 32, H, W) -> image (B, 1, H, W) (in [0, 1] for the ``"tanh"`` head).
 
         ``events`` must be given to the full network and omitted for the spike-only one.
         """
@@ -109,27 +133,32 @@ class NeuSpikeNet(nn.Module):
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(spikes))
         if self.spike_only:
-            return self._decode(t[3], t[2], t[1], t[0])[..., :h, :w]
+            return self._decode(t[3], t[2], t[1], t[0], t[0])[..., :h, :w]
         m = self.motion(pad_to_multiple(events))
         out = self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                           t[0] + self.event_skip_weight * m[0])
+                           t[0] + self.event_skip_weight * m[0], t[0])
         return out[..., :h, :w]
 
     def forward_texture_only(self, spikes: torch.Tensor) -> torch.Tensor:
         """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
 
-        spikes: (B, 32, H, W) -> (B, 1, H, W) in [0, 1]; equals the spike-only module holding the
+        spikes: (B, 32, H, W) -> (B, 1, H, W); equals the spike-only module holding the
         same texture-path, residual and decoder weights.
         """
         if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
             raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(spikes))
-        return self._decode(t[3], t[2], t[1], t[0])[..., :h, :w]
+        return self._decode(t[3], t[2], t[1], t[0], t[0])[..., :h, :w]
 
-    def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor) -> torch.Tensor:
+    def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor,
+                spikes: torch.Tensor) -> torch.Tensor:
         d = self.up1(self.residual(r))
         d = self.up2(torch.cat([d, s2], dim=1))
         d = self.up3(torch.cat([d, s1], dim=1))
         y = self.predict(torch.cat([d, s0.to(d.dtype)], dim=1))
-        return 0.5 * (torch.tanh(y) + 1.0)
+        if self.head == "tanh":
+            return 0.5 * (torch.tanh(y) + 1.0)
+        weights = torch.softmax(y[:, 1:].float(), dim=1)
+        support = (weights * spikes.float()).sum(dim=1, keepdim=True)
+        return support + y[:, :1].float()

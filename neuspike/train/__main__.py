@@ -15,7 +15,7 @@ import sys
 from typing import Any, Sequence
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
-WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers")
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
 #: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
@@ -91,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--noise-levels", metavar="N1,N2,...",
                    help="noise levels drawn (default none,small,medium,high); a level listed twice is drawn twice "
                         "as often (sequences)")
+    d.add_argument("--speed-range", metavar="LOW,HIGH",
+                   help="single windows: pan speeds drawn log-uniformly (px/s at a view 400 pixels wide; default "
+                        "100,4000; the sweeps pan at 1000)")
     d.add_argument("--spike-only-fraction", type=float,
                    help="single windows: fraction of steps training the spike-only variant of a fusion network "
                         "(default 0.3)")
@@ -157,6 +160,13 @@ def spec_from_args(args: argparse.Namespace):
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
+    if args.speed_range is not None:
+        try:
+            kw["speed_range"] = tuple(float(v) for v in _list(args.speed_range))
+        except ValueError:
+            raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}") from None
+        if len(kw["speed_range"]) != 2:
+            raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}")
     if args.view is not None:
         from neuspike.utils.checks import parse_size
 

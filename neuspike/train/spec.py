@@ -75,6 +75,10 @@ def _check_levels(levels: Any) -> tuple[str, ...]:
     return levels
 
 
+#: Pan speeds of the single-window training data (px/s at a view 400 pixels wide).
+DEFAULT_SPEED_RANGE = (100.0, 4000.0)
+
+
 @dataclass(frozen=True)
 class WindowData:
     """Single simulated windows (feed-forward networks), and how they are scored.
@@ -93,8 +97,13 @@ class WindowData:
         L drawn log-uniformly in this range.
     motions : tuple of int
         S drawn uniformly from these.
+    speed_range : (float, float)
+        Pan and dead-leaves speeds (px/s of scene time at a view 400 pixels wide, scaled with the
+        view) drawn log-uniformly in this range, in a uniformly drawn direction. The sweeps pan at
+        1000 px/s; at S = 256 a window spans about 11 ms of scene time.
     noise_levels, photos : tuple of str
-        Noise levels drawn uniformly; training photographs (the test photographs are refused).
+        Noise levels drawn uniformly (repeat a level to draw it more often); training photographs
+        (the test photographs are refused).
     workers : int
         Processes that simulate the shard (not part of the run's identity).
     ssim_weight, ssim_window : float, int
@@ -112,6 +121,7 @@ class WindowData:
     val_items: int = 48
     light_range: tuple[float, float] = (1 / 40, 0.6)
     motions: tuple[int, ...] = MOTIONS
+    speed_range: tuple[float, float] = DEFAULT_SPEED_RANGE
     noise_levels: tuple[str, ...] = NOISE_LEVELS
     photos: tuple[str, ...] = _PHOTO_DEFAULT
     workers: int = 2
@@ -129,6 +139,10 @@ class WindowData:
         if not 0 < lo <= hi:
             raise InputError(f"light_range: expected 0 < low <= high, got {self.light_range}")
         put(self, "light_range", (lo, hi))
+        lo, hi = (float(v) for v in self.speed_range)
+        if not 0 < lo <= hi:
+            raise InputError(f"speed_range: expected 0 < low <= high px/s, got {self.speed_range}")
+        put(self, "speed_range", (lo, hi))
         motions = tuple(int(m) for m in self.motions)
         if not motions or any(m < 1 for m in motions):
             raise InputError(f"motions: expected motion scales >= 1, got {self.motions}")
@@ -141,8 +155,11 @@ class WindowData:
 
         (``train_items`` and ``val_items`` only say how many of the same deterministic cells exist.)
         """
-        return {"seed": seed, "view": self.view, "light_range": list(self.light_range),
-                "motions": list(self.motions), "noise_levels": list(self.noise_levels), "photos": list(self.photos)}
+        key = {"seed": seed, "view": self.view, "light_range": list(self.light_range),
+               "motions": list(self.motions), "noise_levels": list(self.noise_levels), "photos": list(self.photos)}
+        if self.speed_range != DEFAULT_SPEED_RANGE:  # shards made before the range was a field keep their key
+            key["speed_range"] = list(self.speed_range)
+        return key
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
     size = (data.view, data.view)
     angle = rng.uniform(0, 2 * np.pi)
-    speed = float(np.exp(rng.uniform(np.log(100.0), np.log(4000.0)))) * data.view / SENSOR_SIZE[0]
+    lo, hi = data.speed_range
+    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * data.view / SENSOR_SIZE[0]
     velocity = (speed * np.cos(angle), speed * np.sin(angle))
     if kind == "dead_leaves":
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))

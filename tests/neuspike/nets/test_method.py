@@ -170,3 +170,15 @@ def test_weights_trained_for_another_design_are_refused(weights_dir):
     card.write_text(json.dumps(data))
     with pytest.raises(FormatError, match="trained for"):
         create("neuspike-net", weights_dir=weights_dir)
+
+
+def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(weights_dir):
+    import json
+
+    card = weights_dir / "neuspike-net.json"
+    data = json.loads(card.read_text())
+    data["model"]["params"].pop("head", None)  # a card written before heads existed
+    card.write_text(json.dumps(data))
+    assert create("neuspike-net", weights_dir=weights_dir, head="tanh").module.head == "tanh"
+    with pytest.raises(FormatError, match="trained for"):
+        create("neuspike-net", weights_dir=weights_dir, head="support")

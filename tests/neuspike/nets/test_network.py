@@ -94,3 +94,39 @@ def test_bad_inputs_are_typed_errors():
         NeuSpikeNet(spike_only=True)(x, x)
     with pytest.raises(InputError, match="fusion"):
         NeuSpikeNet(fusion="concat")
+
+
+def test_support_head_starts_as_the_mean_of_the_spike_estimates(one_torch_thread):
+    """Zero-initialised, the head is the plain mean of the 32 radiance estimates (TFP and TFI over the window)."""
+    torch.manual_seed(3)
+    for spike_only in (False, True):
+        net = NeuSpikeNet(head="support", spike_only=spike_only).eval()
+        x = torch.rand(2, 32, 21, 30) * 3.0
+        with torch.no_grad():
+            y = net(x) if spike_only else net(x, torch.randn_like(x))
+        assert y.shape == (2, 1, 21, 30)
+        assert torch.allclose(y, x.mean(dim=1, keepdim=True), atol=1e-6)
+
+
+def test_support_head_is_a_convex_choice_among_the_estimates_plus_a_correction(one_torch_thread):
+    torch.manual_seed(4)
+    net = NeuSpikeNet(head="support", spike_only=True).eval()
+    with torch.no_grad():
+        net.predict.weight.normal_(0.0, 0.5)  # logits depend on the features
+        net.predict.weight[0].zero_()
+        net.predict.bias.zero_()
+        x = torch.rand(1, 32, 16, 24) * 2.0
+        y = net(x)
+        lo, hi = x.min(dim=1, keepdim=True).values, x.max(dim=1, keepdim=True).values
+        assert bool(((y >= lo - 1e-5) & (y <= hi + 1e-5)).all())  # the absolute scale is the data's
+        assert not torch.allclose(y, x.mean(dim=1, keepdim=True), atol=1e-3)  # and it chooses per pixel
+        net.predict.bias[0] = 0.25  # the first channel adds a correction in radiance units
+        assert torch.allclose(net(x), y + 0.25, atol=1e-5)
+
+
+def test_parameter_count_of_the_support_head():
+    tanh, support = NeuSpikeNet(), NeuSpikeNet(head="support")
+    extra = sum(p.numel() for p in support.parameters()) - sum(p.numel() for p in tanh.parameters())
+    assert extra == conv(32 + 32, 1 + 32) - conv(32 + 32, 1)
+    with pytest.raises(InputError, match="head"):
+        NeuSpikeNet(head="sigmoid")

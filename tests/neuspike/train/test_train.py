@@ -49,6 +49,21 @@ def test_same_seed_same_cells_and_windows(tmp_path):
     assert np.array_equal(s1.spikes.planes, s2.spikes.planes) and np.array_equal(s1.events.t_s, s2.events.t_s)
 
 
+def test_pan_speeds_are_drawn_in_the_speed_range_and_old_shard_keys_stay(tmp_path):
+    from neuspike.train.spec import DEFAULT_SPEED_RANGE
+
+    spec = tiny_spec(tmp_path, view=40, speed_range=(5000.0, 20000.0))
+    scale = 40 / 400  # speeds are given at a view 400 pixels wide
+    speeds = [float(np.hypot(*scene.velocity_px_s)) / scale
+              for scene, *_ in (draw_cell(spec, "train", i, tmp_path) for i in range(60))
+              if scene.kind in ("pan", "dead_leaves")]
+    assert len(speeds) > 5 and min(speeds) >= 5000.0 - 1e-6 and max(speeds) <= 20000.0 + 1e-6
+    assert WindowData().speed_range == DEFAULT_SPEED_RANGE and "speed_range" not in WindowData().key(0)
+    assert WindowData(speed_range=(100, 20000)).key(0)["speed_range"] == [100.0, 20000.0]
+    with pytest.raises(InputError, match="speed_range"):
+        WindowData(speed_range=(0, 100))
+
+
 def test_saved_windows_load_back_identically(tmp_path):
     spec = tiny_spec(tmp_path)
     s = simulate_cell(spec, "val", 0, tmp_path)
