@@ -100,7 +100,9 @@ def scene_entry(name: str, size: tuple[int, int]) -> SceneEntry:
     Parameters
     ----------
     name : str
-        ``"pan:camera"``, ``"zoom:clock"``, ``"fan:coins"``, ``"still:moon"``, or ``KIND:PATH``.
+        ``"pan:camera"``, ``"zoom:clock"``, ``"fan:coins"``, ``"still:moon"``, or ``KIND:PATH``. A pan
+        may carry a speed factor: ``"pan@8x:camera"`` pans 8 times the default speed
+        (:data:`PAN_SPEED_PX_S_AT_400`, scaled with the view width).
     size : (int, int)
         View width and height in pixels.
 
@@ -114,6 +116,7 @@ def scene_entry(name: str, size: tuple[int, int]) -> SceneEntry:
         raise InputError(f"scene: expected KIND:IMAGE with KIND in {', '.join(SCENE_KINDS)}, got {name!r}")
     kind, _, image = name.partition(":")
     kind, image = kind.strip(), image.strip()
+    kind, factor = _speed_factor(name, kind)
     if kind not in SCENE_KINDS:
         raise InputError(f"scene {name!r}: kind must be one of {', '.join(SCENE_KINDS)}, got {kind!r}")
     if not image:
@@ -121,10 +124,27 @@ def scene_entry(name: str, size: tuple[int, int]) -> SceneEntry:
     width, height = _check_size(size)
     params: dict[str, Any] = {}
     if kind == "pan":
-        speed = PAN_SPEED_PX_S_AT_400 * width / 400.0
+        speed = PAN_SPEED_PX_S_AT_400 * width / 400.0 * factor
         params["velocity_px_s"] = (0.8 * speed, 0.6 * speed)  # |v| = speed, diagonal
+    elif factor != 1.0:
+        raise InputError(f"scene {name!r}: a speed factor (@Fx) applies to pans only")
     spec = SceneSpec(kind=kind, image=image, size=(width, height), **params)
-    return SceneEntry(f"{kind}:{image}", spec)
+    label = kind if factor == 1.0 else f"{kind}@{factor:g}x"
+    return SceneEntry(f"{label}:{image}", spec)
+
+
+def _speed_factor(name: str, kind: str) -> tuple[str, float]:
+    """``"pan@8x"`` -> ("pan", 8.0); a kind without ``@`` -> (kind, 1.0)."""
+    if "@" not in kind:
+        return kind, 1.0
+    base, _, text = kind.partition("@")
+    try:
+        factor = float(text.strip().removesuffix("x"))
+    except ValueError:
+        factor = float("nan")
+    if not (factor > 0 and factor != float("inf")):
+        raise InputError(f"scene {name!r}: expected a speed factor such as pan@8x:IMAGE, got {text!r}")
+    return base.strip(), factor
 
 
 def _check_size(size: Any) -> tuple[int, int]:
