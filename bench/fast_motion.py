@@ -151,7 +151,6 @@ def temporal_support(out: Path, spec, *, weights: str | None = None, threads: in
     """Write ``support.csv``: each learned method's sensitivity to each time bin (module docstring)."""
     import numpy as np
     import pandas as pd
-    import torch
 
     from neuspike.methods import create
     from neuspike.simulation.cell import simulate_sample
