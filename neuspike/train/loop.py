@@ -9,6 +9,11 @@ trainer builds it with :meth:`~neuspike.methods.learned.LearnedMethod.for_traini
 each step's batch from the seed and the step alone, so a resumed run computes what a straight one
 does.
 
+Precision: ``"auto"`` trains in float32 on a CPU without native bfloat16; where the CPU has it, one
+training step (forward and backward of step 0's batch) is timed in both and bfloat16 is used only when
+it takes at most 0.9 times as long (on some CPUs with the instructions it is slower). The choice and
+its measurement are written to ``precision.json`` in the run folder, and a resumed run keeps it.
+
 Each step: the rate of :func:`~neuspike.train.spec.learning_rate`, the task's loss (under bfloat16
 autocast where the precision says so), AdamW or Adam, gradients clipped to norm 1. Every
 ``val_every`` steps (and at the last) each variant is validated; a better score than the best so
@@ -21,6 +26,7 @@ every ``checkpoint_every`` steps, after each validation and when the run stops
 from __future__ import annotations
 
 import contextlib
+import json
 import time
 from pathlib import Path
 from typing import Any, Iterator
@@ -52,6 +58,10 @@ def training_method(spec: TrainSpec):
         raise InputError(f"method {spec.method!r} trains on {want}, but the spec's data are {spec.kind}")
     torch.manual_seed(spec.seed)
     return e.factory.for_training(e.name, **{**dict(e.params), **spec.params})
+
+
+#: bfloat16 is chosen only when its measured step takes at most this fraction of float32's.
+BF16_FASTER = 0.9
 
 
 class Trainer:
@@ -169,6 +179,39 @@ class Trainer:
             torch.set_rng_state(state["torch_rng"])
         return True
 
+    def choose_precision(self) -> dict[str, Any]:
+        """Settle ``"auto"`` (module docstring); write or reuse ``precision.json``; return its record."""
+        from neuspike.utils import atomic
+
+        path = self.out / "precision.json"
+        if path.exists():  # a resumed run keeps the arithmetic it started with
+            record = json.loads(path.read_text())
+        elif self.spec.precision != "auto" or self.precision == "float32":
+            record = {"choice": self.precision, "requested": self.spec.precision, "measured": False}
+        else:
+            times = {p: self._step_ms(p) for p in ("float32", "bfloat16")}
+            choice = "bfloat16" if times["bfloat16"] <= BF16_FASTER * times["float32"] else "float32"
+            record = {"choice": choice, "requested": "auto", "measured": True,
+                      "ms_per_step": {k: round(v, 1) for k, v in times.items()}, "rule": f"bfloat16 if <= {BF16_FASTER} x float32"}
+        self.out.mkdir(parents=True, exist_ok=True)
+        atomic.write_json(path, record)
+        self.precision = self.task.precision = record["choice"]
+        return record
+
+    def _step_ms(self, precision: str, repeats: int = 3) -> float:
+        """Median ms of a forward and backward pass of step 0's batch in ``precision`` (no update)."""
+        self.precision = self.task.precision = precision
+        self.module.train()
+        times = []
+        for i in range(repeats + 1):
+            t0 = time.perf_counter()
+            loss, _ = self.task.step_loss(0, self.autocast)
+            loss.backward()
+            self.optim.zero_grad(set_to_none=True)
+            if i:  # the first pass warms up
+                times.append(1e3 * (time.perf_counter() - t0))
+        return sorted(times)[len(times) // 2]
+
     # -- the run -----------------------------------------------------------------------------------
 
     def run(self, *, until: int | None = None, max_minutes: float | None = None,
@@ -192,6 +235,7 @@ class Trainer:
         if simulate_only:
             return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}
         resumed = self.resume()
+        self.choose_precision()
         ck.trim_log(self.out, self.step)
         self.task.load_validation()
         if not resumed and spec.init_from is not None:

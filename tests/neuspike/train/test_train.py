@@ -145,3 +145,27 @@ def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_
     assert set(baseline) == {"fusion", "spike"}  # fusion and spike-only scored before the first step
     assert set(second.best) == {"fusion", "spike"}
     assert all(second.best[v]["val_psnr"] >= baseline[v] for v in baseline)
+
+
+def test_auto_precision_takes_bfloat16_only_when_a_measured_step_is_faster_and_a_resume_keeps_it(
+        tmp_path, one_torch_thread, monkeypatch):
+    import json
+
+    spec = tiny_spec(tmp_path, precision="auto", steps=2)
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    before = {k: v.clone() for k, v in trainer.module.state_dict().items()}
+    assert trainer._step_ms("bfloat16", repeats=1) > 0 and trainer._step_ms("float32", repeats=1) > 0
+    for k, v in trainer.module.state_dict().items():  # timing a step changes no weight
+        assert torch.equal(v, before[k]), k
+    for bf16_ms, want in ((95.0, "float32"), (80.0, "bfloat16")):
+        (tmp_path / "run" / "precision.json").unlink(missing_ok=True)
+        trainer.precision = "bfloat16"  # what "auto" resolves to on a CPU with native bfloat16
+        monkeypatch.setattr(trainer, "_step_ms", lambda p, repeats=3, b=bf16_ms: {"float32": 100.0, "bfloat16": b}[p])
+        record = trainer.choose_precision()
+        assert record["measured"] and record["choice"] == want == trainer.precision == trainer.task.precision
+    resumed = Trainer(spec, quiet=True)  # the folder's record wins over a new measurement
+    assert resumed.choose_precision()["choice"] == "bfloat16" == resumed.precision
+    assert json.loads((tmp_path / "run" / "precision.json").read_text())["ms_per_step"]["bfloat16"] == 80.0
+    plain = Trainer(tiny_spec(tmp_path / "f32", precision="float32"), quiet=True).choose_precision()
+    assert plain == {"choice": "float32", "requested": "float32", "measured": False}
