@@ -288,8 +288,8 @@ class TrainSpec:
     threads : int or None
         torch threads (None: as the process has them).
     precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
-        Autocast precision (:func:`neuspike.methods.learned.resolve_precision`; auto = bfloat16 where the CPU
-        computes it natively).
+        Autocast precision; auto = bfloat16 where the CPU computes it natively and a timed training step
+        is faster in it (:meth:`neuspike.train.loop.Trainer.choose_precision`), else float32.
     params : dict
         Overrides of the method's registered parameters.
     init_from : str or None
