@@ -10,6 +10,10 @@ Inputs (in ``RESULTS_DIR``; each optional, at least one of the first two)
     ``config.json``, ``metadata.json``  what ran and where (shown on the title page)
     ``images/``                reconstructions for the figure grid (below)
 
+A folder written by ``python -m bench.dataset`` (``config.json`` holds ``dataset``) gets the dataset
+report of :mod:`bench.dataset_report` instead: the protocol first, a table per recording and method,
+and a contact sheet per recording.
+
 Outputs (into ``RESULTS_DIR``, or ``--out``; every file written atomically)
     ``figures/<axis>_psnr_ssim.png``, ``figures/<axis>_affine.png``  metrics against each swept axis
     ``figures/grid_<scene>_<axis>.png``  reconstruction grid of every scene with images (the PDF
@@ -344,6 +348,10 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
     for folder in (out, fig_dir, tab_dir):  # a killed report's temporaries (a half PDF can be 20 MB)
         if folder.is_dir():
             remove_stale_temporaries(folder)
+    if isinstance(inputs.config.get("dataset"), dict):  # a folder of bench.dataset: its own tables and sheets
+        from bench.dataset_report import build_dataset_report
+
+        return build_dataset_report(inputs, out)
     written: list[Path] = []
     figure_pages: list[Any] = []
     table_pages: list[Any] = []
