@@ -28,6 +28,8 @@ from bench.results import ERROR, OK, SKIPPED
 
 #: Tiles per row of a contact sheet.
 SHEET_COLUMNS = 4
+#: Widest sheet embedded in the PDF (the PNG under figures/ keeps every pixel); an A4 page shows no more.
+PDF_SHEET_WIDTH_PX = 800
 METRIC_ORDER = ("psnr", "ssim", "psnr_affine", "ssim_affine", "noise_sigma", "laplacian_var")
 
 
@@ -133,6 +135,16 @@ def contact_sheet(folder: Path, recording: str, frame: pd.DataFrame) -> np.ndarr
     return np.concatenate(out, axis=0)
 
 
+def _fit(sheet: np.ndarray, width_px: int) -> np.ndarray:
+    """``sheet`` shrunk (area averaging) to at most ``width_px`` wide; never enlarged."""
+    if sheet.shape[1] <= width_px:
+        return sheet
+    import cv2
+
+    height = max(1, round(sheet.shape[0] * width_px / sheet.shape[1]))
+    return cv2.resize(sheet, (width_px, height), interpolation=cv2.INTER_AREA)
+
+
 def _middle_instant(frame: pd.DataFrame, recording: str) -> int:
     """The instant whose images were kept: the middle of the recording's instants."""
     instants = sorted(int(i) for i in pd.unique(frame.loc[frame["scene"] == recording, "instant"].dropna()))
@@ -216,7 +228,7 @@ def build_dataset_report(inputs: Any, out: Path) -> Path:
                 fig.text(0.04, 0.96, f"{recording}: every method at its middle instant", fontsize=13, weight="bold",
                          va="top")
                 ax = fig.add_axes((0.03, 0.03, 0.94, 0.88))
-                ax.imshow(sheet, cmap="gray", vmin=0, vmax=255, interpolation="lanczos")
+                ax.imshow(_fit(sheet, PDF_SHEET_WIDTH_PX), cmap="gray", vmin=0, vmax=255, interpolation="none")
                 ax.axis("off")
                 pages.append(fig)
         pdf = out / "report.pdf"
