@@ -16,6 +16,7 @@ Called by :func:`bench.reporting.build_report` when ``config.json`` holds a ``da
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -91,10 +92,14 @@ def failures(frame: pd.DataFrame) -> pd.DataFrame:
     return g[cols].reset_index(drop=True)
 
 
+def image_path(images_dir: str | os.PathLike, recording: str, name: str) -> Path:
+    """Where a method's (or ``"gt"``'s) image of a recording's middle instant is kept:
+    ``images/<recording>/<method>.png`` (names through :func:`bench.tables.safe_name`)."""
+    return Path(images_dir) / tb.safe_name(recording) / f"{tb.safe_name(name)}.png"
+
+
 def contact_sheet(folder: Path, recording: str, frame: pd.DataFrame) -> np.ndarray | None:
     """uint8 sheet of a recording's saved images (``images/<recording>/``), or ``None`` without images."""
-    from bench.datasets import image_path
-    from bench.reporting import _read_gray
     from neuspike.formats.images import to_uint8
     from neuspike.video.writers import label_image, tile_row
 
@@ -105,7 +110,7 @@ def contact_sheet(folder: Path, recording: str, frame: pd.DataFrame) -> np.ndarr
         path = image_path(folder / "images", recording, name)
         if not path.is_file():
             continue
-        image = _read_gray(path)
+        image = figs.read_gray(path)
         label = "ground truth" if name == "gt" else name
         if name != "gt":
             mine = sub[sub["method"] == name]
@@ -178,12 +183,14 @@ def protocol_blocks(dataset: dict[str, Any]) -> list[tuple[str, str]]:
     return blocks
 
 
-def build_dataset_report(inputs: Any, out: Path) -> Path:
-    """Write the tables, the contact sheets and ``report.pdf`` of a dataset folder; return the PDF's path."""
+def build_dataset_report(inputs: Any, out: Path, *, provenance: list[tuple[str, str]]) -> Path:
+    """Write the tables, the contact sheets and ``report.pdf`` of a dataset folder; return the PDF's path.
+
+    ``inputs`` is :func:`bench.reporting.load_inputs`'s; ``provenance`` the title page's provenance
+    blocks (:func:`bench.reporting.title_blocks` without the results).
+    """
     from neuspike.formats.images import write_png
     from neuspike.utils.atomic import write_text
-    from bench.reporting import _write_pdf, title_blocks
-    import dataclasses
 
     f = inputs.results
     dataset = inputs.config.get("dataset") or {}
@@ -195,7 +202,6 @@ def build_dataset_report(inputs: Any, out: Path) -> Path:
                                                f"{f['scene'].nunique() if f is not None else 0} recordings, "
                                                f"{len(tb.method_order(f)) if f is not None and len(f) else 0} methods.")]
         blocks += protocol_blocks(dataset)
-        provenance = title_blocks(dataclasses.replace(inputs, results=None))
         blocks += [b for b in provenance if not (b[0] == "h" and b[1] == "Contents")][:-1]
         pages += figs.text_figures("NeuSpike Bench dataset report", blocks, width=128)
         if f is not None and len(f):
@@ -232,7 +238,7 @@ def build_dataset_report(inputs: Any, out: Path) -> Path:
                 ax.axis("off")
                 pages.append(fig)
         pdf = out / "report.pdf"
-        _write_pdf(pdf, pages)
+        figs.write_pdf(pdf, pages)
     finally:
         figs.close_all(pages)
         import matplotlib.pyplot as plt

@@ -294,14 +294,8 @@ def run_instant(task: InstantTask) -> Any:
 # The run
 # ----------------------------------------------------------------------------------------------
 
-def image_path(images_dir: str | os.PathLike, recording: str, name: str) -> Path:
-    """Where a method's (or ``"gt"``'s) image of a recording's middle instant is kept."""
-    from bench.tables import safe_name
-
-    return Path(images_dir) / safe_name(recording) / f"{safe_name(name)}.png"
-
-
 def _write_images(out: Path, task: InstantTask, images: dict[str, np.ndarray]) -> None:
+    from bench.dataset_report import image_path
     from neuspike.formats.images import write_png
 
     for name, image in images.items():
