@@ -1,8 +1,9 @@
 """The sweep harness: every cell of a grid with every requested method, resumable (the library behind
 ``python -m bench.sweep`` and ``python -m bench.noise``; the commands live in :mod:`bench.sweep`).
 
-A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method, and writes
-into its output folder:
+A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method through
+:func:`run_tasks`, the resumable loop that :mod:`bench.datasets` shares (its tasks are the instants
+of real recordings), and writes into its output folder:
 
 ``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs,
                     the device and each learned method's precision) and how it was executed
