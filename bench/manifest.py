@@ -47,8 +47,8 @@ Layouts read without a manifest (:func:`infer_manifest`)
     instant at the centre plane, the gain given on the command line (or the ``.npz``'s, else
     unknown); a ``.dat``'s size is the ground truth's. ``events-frames``: one event file, an
     ``images/`` folder and a list ``images.txt`` of ``<t seconds> images/<file>`` lines (the
-    Event-Camera Dataset's), an instant at each frame's time inside the event recording, that
-    frame as its ground truth. ``files``: spike files in ``spike/`` and event files in ``events/``
+    Event-Camera Dataset's; where several files could hold events, the one called ``events.*``), an
+    instant at each frame's time inside the event recording, that frame as its ground truth. ``files``: spike files in ``spike/`` and event files in ``events/``
     (or at the top of the folder), each a recording of its own at its centre, without ground truth.
 """
 
@@ -451,6 +451,8 @@ def _infer_spike_gt(root: Path, gain: float | None, common: dict[str, Any], heig
 
 def _infer_events_frames(root: Path, common: dict[str, Any], notes: list[str]) -> dict[str, Any]:
     events = [p for p in sorted(root.iterdir()) if p.is_file() and _is_event_file(p)]
+    named = [p for p in events if p.stem == "events"]  # events.txt beside imu.txt, groundtruth.txt, ...
+    events = named or events
     if len(events) != 1:
         found = ", ".join(p.name for p in events) or "none"
         raise InputError(f"dataset {root}: the events-frames layout needs exactly one event file beside images/, "

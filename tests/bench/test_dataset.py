@@ -264,3 +264,15 @@ def test_help_explains_the_layouts(capsys):
     text = capsys.readouterr().out
     for word in ("spike-gt", "events-frames", "manifest.json", "no-reference", "exit status"):
         assert word in text
+
+
+def test_events_frames_picks_the_file_called_events(events_frames, tmp_path):
+    """The Event-Camera Dataset keeps imu.txt and groundtruth.txt beside events.txt: the one called events is read."""
+    root = tmp_path / "ds"
+    shutil.copytree(events_frames, root)
+    (root / "imu.txt").write_text("0.0 0 0 0 0 0 0\n")
+    (entry,) = mf.infer_manifest(root).recordings
+    assert entry.events == "events.h5"
+    (root / "events.h5").rename(root / "dvs.h5")
+    with pytest.raises(mf.InputError, match="exactly one event file beside images/, found dvs.h5, imu.txt"):
+        mf.infer_manifest(root)
