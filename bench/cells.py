@@ -266,7 +266,48 @@ def _stage_summary(meta: dict[str, Any]) -> tuple[list[tuple[str, str]], float, 
     return names, float(sum(seconds.values())), json.dumps(seconds, sort_keys=True)
 
 
-def _timed_reconstruct(slot: list[Any], sample: Any) -> tuple[np.ndarray, float]:
+def method_slots(methods: tuple[str, ...], setup: WorkerSetup, failures: dict[str, str],
+                 skipped: dict[str, str]) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The per-process instances of ``methods`` that can run, and what each row says about every method.
+
+    Returns ``(resolved, info)``: ``resolved`` maps the methods that can run to their slot of
+    :func:`instances`; ``info`` maps every method to its row fields (``inputs``, ``recurrent``,
+    ``parameters``, ``method_params``) and a ``skip`` or ``error`` text where it cannot run.
+    Tracebacks go to ``failures``, reasons for skipping to ``skipped`` (both updated in place).
+    """
+    resolved: dict[str, Any] = {}
+    info: dict[str, dict[str, Any]] = {name: {"method": name} for name in methods}
+    try:
+        slots = instances(methods, setup)
+    except Exception as exc:  # an unknown name or an unusable device (the driver refuses both first)
+        slots = {}
+        for name in methods:
+            failures[name] = traceback.format_exc()
+            info[name]["error"] = f"creating the method failed: {one_line(exc)}"
+    for name, slot in slots.items():
+        entry, created = slot[0], slot[1]
+        info[name]["inputs"] = "+".join(sorted(entry.inputs))
+        if created.unavailable is not None:
+            skipped[name] = one_line(created.unavailable)
+            info[name]["skip"] = f"unavailable: {skipped[name]}"
+        elif created.error is not None:
+            failures[name] = created.traceback
+            info[name]["error"] = f"creating the method failed: {one_line(created.error)}"
+        else:
+            method = created.method
+            try:
+                info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()),
+                                  method_params=canonical_json(method.describe()))
+                resolved[name] = slot
+            except Exception as exc:
+                failures[name] = traceback.format_exc()
+                info[name]["error"] = f"creating the method failed: {one_line(exc)}"
+    return resolved, info
+
+
+def timed_reconstruct(slot: list[Any], sample: Any) -> tuple[np.ndarray, float]:
+    """``(image, ms)``: the method of ``slot`` on ``sample`` after ``reset()``, timed; its first use in
+    this process is one untimed call before (one-off costs stay out of the timing)."""
     method = slot[1].method
     if not slot[2]:
         method.reset()
@@ -307,33 +348,7 @@ def run_cell(task: CellTask) -> CellResult:
                           os.getpid(), time.perf_counter() - t_start)
 
     # Resolve the methods first: the simulation is not needed when none can run.
-    resolved: dict[str, Any] = {}
-    info: dict[str, dict[str, Any]] = {name: {"method": name} for name in task.methods}
-    try:
-        slots = instances(task.methods, task.setup)
-    except Exception as exc:  # an unknown name or an unusable device (the driver refuses both first)
-        slots = {}
-        for name in task.methods:
-            failures[name] = traceback.format_exc()
-            info[name]["error"] = f"creating the method failed: {one_line(exc)}"
-    for name, slot in slots.items():
-        entry, created = slot[0], slot[1]
-        info[name]["inputs"] = "+".join(sorted(entry.inputs))
-        if created.unavailable is not None:
-            skipped[name] = one_line(created.unavailable)
-            info[name]["skip"] = f"unavailable: {skipped[name]}"
-        elif created.error is not None:
-            failures[name] = created.traceback
-            info[name]["error"] = f"creating the method failed: {one_line(created.error)}"
-        else:
-            method = created.method
-            try:
-                info[name].update(recurrent=bool(method.recurrent), parameters=int(method.parameter_count()),
-                                  method_params=canonical_json(method.describe()))
-                resolved[name] = slot
-            except Exception as exc:
-                failures[name] = traceback.format_exc()
-                info[name]["error"] = f"creating the method failed: {one_line(exc)}"
+    resolved, info = method_slots(task.methods, task.setup, failures, skipped)
 
     recording = None
     cache_hit = False
@@ -388,7 +403,7 @@ def run_cell(task: CellTask) -> CellResult:
             slot = resolved[name]
             method = slot[1].method
             try:
-                image, ms = _timed_reconstruct(slot, sample)
+                image, ms = timed_reconstruct(slot, sample)
                 row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
                 values = evaluate(image, truth, data_range=DATA_RANGE)
                 if static is not None:

@@ -399,3 +399,26 @@ def claims_figures(verdicts: pd.DataFrame) -> list[Figure]:
 def close_all(figs: Sequence[Figure]) -> None:
     for f in figs:
         plt.close(f)
+
+
+def read_gray(path: Path) -> np.ndarray:
+    """A PNG (or other image) as a float greyscale array in [0, 1]."""
+    import matplotlib.image as mpimg
+
+    raw = np.asarray(mpimg.imread(path))  # PNGs come back as floats in [0, 1]; other formats as integers
+    im = raw / np.iinfo(raw.dtype).max if raw.dtype.kind in "ui" else raw.astype(np.float64)
+    if im.ndim == 3:
+        im = im[..., :3].mean(axis=2)
+    return im
+
+
+def write_pdf(path: Path, pages: Sequence[Any]) -> None:
+    """The figures ``pages`` as one PDF, written atomically."""
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    from neuspike.utils.atomic import replacing
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with replacing(path) as tmp, PdfPages(tmp, metadata={"Creator": "NeuSpike Bench", "CreationDate": None}) as pdf:
+        for page in pages:
+            pdf.savefig(page)

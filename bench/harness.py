@@ -1,8 +1,9 @@
 """The sweep harness: every cell of a grid with every requested method, resumable (the library behind
 ``python -m bench.sweep`` and ``python -m bench.noise``; the commands live in :mod:`bench.sweep`).
 
-A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method, and writes
-into its output folder:
+A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method through
+:func:`run_tasks`, the resumable loop that :mod:`bench.datasets` shares (its tasks are the instants
+of real recordings), and writes into its output folder:
 
 ``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs,
                     the device and each learned method's precision) and how it was executed
@@ -238,7 +239,8 @@ class SweepOutcome:
         if self.time_split:
             sim = self.time_split["simulation_s_per_cell"]
             per = ", ".join(f"{m} {v:.1f}" for m, v in self.time_split["method_ms_per_frame"].items())
-            lines.append(f"time: simulation {sim:.3f} s per cell; methods, median ms per frame: {per}")
+            head = f"simulation {sim:.3f} s per cell; " if sim == sim else ""  # NaN: nothing was simulated (datasets)
+            lines.append(f"time: {head}methods, median ms per frame: {per}")
         if self.n_failed and self.allow_failures:
             lines.append("failures allowed (--allow-failures): see the error column and errors/")
         return "\n".join(lines)
@@ -358,27 +360,37 @@ def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
     return [path or "(everything)"]
 
 
-def _check_config(out: Path, sweep_config: dict[str, Any], force: bool) -> bool:
-    """Compare with an existing ``config.json``; return whether the old results are stale."""
+def check_config(out: Path, config: dict[str, Any], force: bool, *, key: str = "sweep") -> bool:
+    """Compare ``config`` with the ``key`` entry of an existing ``config.json`` (``"sweep"``, or
+    ``"dataset"`` for :mod:`bench.datasets`); return whether the old results are stale.
+
+    Raises
+    ------
+    ConfigMismatch
+        The folder holds results of another configuration and ``force`` is false.
+    """
     path = out / "config.json"
     if not path.exists():
         return False
     try:
-        old = json.loads(path.read_text()).get("sweep")
-    except (OSError, ValueError) as exc:
+        old = json.loads(path.read_text()).get(key)
+    except (OSError, ValueError, AttributeError) as exc:
         old = {"unreadable": str(exc)}
-    new = json.loads(canonical_json(sweep_config))
-    if isinstance(old, dict) and "device" not in old and "precision" not in old and "device" in new:
+    new = json.loads(canonical_json(config))
+    if key == "sweep" and isinstance(old, dict) and "device" not in old and "precision" not in old and "device" in new:
         old = {**old, **_legacy_arithmetic(out, new)}  # written before the identity held them
     if old == new:
         return False
     if not force:
         changed = ", ".join(_diff_paths(old, new)[:8])
         raise ConfigMismatch(
-            f"{out} holds results of a different sweep (changed: {changed}). Use a new --out folder, "
-            "or --force to replace those results (cached recordings are kept and reused)."
+            f"{out} holds results of a different {key} (changed: {changed}). Use a new --out folder, "
+            "or --force to replace those results" + (" (cached recordings are kept and reused)." if key == "sweep" else ".")
         )
     return True
+
+
+_check_config = check_config
 
 
 def _read_json(path: Path) -> dict[str, Any] | None:
@@ -489,6 +501,28 @@ def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]
 # Running a sweep
 # ----------------------------------------------------------------------------------------------
 
+def prepare_execution(execution: Execution, weights: str | None) -> tuple[Any, int, bool, WorkerSetup]:
+    """The executor, the threads per worker, whether the workers are remote, and the workers' set-up.
+
+    Threads default to the usable CPUs divided by the workers (1 on a remote Dask cluster); local
+    workers x threads beyond the usable CPUs are refused (:class:`InputError`).
+    """
+    executor = execution.executor
+    threads = execution.threads
+    if threads is not None:
+        threads = check_positive_int("threads", threads)
+    if isinstance(executor, str):
+        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
+    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
+    if threads is None:
+        threads = 1 if remote else max(1, usable_cpus() // max(1, executor.workers))
+    if not remote:  # workers on this machine, with the threads given or the default
+        _check_oversubscription(executor.workers, threads)
+    plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
+    setup = WorkerSetup(plugins=plugins, weights=weights, threads=threads, device=execution.device)
+    return executor, threads, remote, setup
+
+
 def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution = Execution()) -> SweepOutcome:
     """Run (or resume) a sweep into ``out_dir`` and assemble its ``results.csv``.
 
@@ -503,27 +537,13 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
 
     t_start = time.perf_counter()
     out = check_writable_folder(out_dir, what="output folder")
-    parts_dir, errors_dir = out / "parts", out / "errors"
     preflight(spec)
-
-    executor = execution.executor
-    threads = execution.threads
-    if threads is not None:
-        threads = check_positive_int("threads", threads)
-    if isinstance(executor, str):
-        executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
-    remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
-    if threads is None:
-        threads = 1 if remote else max(1, usable_cpus() // max(1, executor.workers))
-    if not remote:  # workers on this machine, with the threads given or the default
-        _check_oversubscription(executor.workers, threads)
-    plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
-    setup = WorkerSetup(plugins=plugins, weights=spec.weights, threads=threads, device=execution.device)
+    executor, threads, remote, setup = prepare_execution(execution, spec.weights)
 
     resolved = resolve_methods(spec, setup)
     arith = arithmetic(spec, setup)
     sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved, **arith}
-    stale = _check_config(out, sweep_config, execution.force)
+    stale = check_config(out, sweep_config, execution.force)
     cache_dir = None
     if execution.use_cache:
         cache_dir = str(Path(execution.cache_dir).resolve() if execution.cache_dir else (out / "cache").resolve())
@@ -536,10 +556,52 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
             modalities=tuple(resolved["modalities"]), history_s=resolved["history_s"],
             cache_dir=cache_dir, setup=setup, keep_images=spec.keeps_images(cell),
         ))
-    ids = [t.cell_id for t in tasks]
-    if len(set(ids)) != len(ids):
+    if len({t.cell_id for t in tasks}) != len(tasks):
         raise InputError("two cells of the grid are identical; check the scene names and axes")
+    extra = {"cache_dir": portable_path(cache_dir) if cache_dir is not None else None, "plugins": list(setup.plugins)}
+    outcome = run_tasks(
+        out, tasks, run_cell, config={"sweep": sweep_config}, stale=stale, executor=executor, threads=threads,
+        remote=remote, execution=execution, label=f"{spec.name} sweep", run_info={"sweep": spec.name},
+        execution_info=extra, skipped=dict(resolved["unavailable"]), t_start=t_start,
+        write_images=lambda task, images: _write_images(out / "images", spec.axis, task.cell, images),
+    )
+    outcome.history_s = resolved["history_s"]
+    outcome.use_cache = cache_dir is not None
+    return outcome
 
+
+def run_tasks(
+    out: Path, tasks: list[Any], run_fn: Any, *, config: dict[str, Any], stale: bool, executor: Any, threads: int,
+    remote: bool, execution: Execution, label: str, run_info: dict[str, Any], execution_info: dict[str, Any],
+    skipped: dict[str, str], t_start: float, write_images: Any = None,
+) -> SweepOutcome:
+    """Run every task without a part file, resumably, and assemble ``results.csv``: the loop every
+    harness command shares (a sweep's cells, a dataset's recording instants).
+
+    Parameters
+    ----------
+    out : Path
+        The output folder (checked writable).
+    tasks : list
+        Picklable tasks with a unique ``cell_id``; ``run_fn(task)`` returns a
+        :class:`~bench.cells.CellResult` and never raises for a method's failure.
+    config : dict
+        What ``config.json`` holds besides ``execution`` (the identity :func:`check_config` compared).
+    stale : bool
+        The folder's old results belong to another configuration: they are removed first.
+    executor, threads, remote
+        From :func:`prepare_execution`.
+    label : str
+        The progress bar's name.
+    run_info, execution_info : dict
+        Extra entries of ``metadata.json`` and of ``config.json``'s ``execution``.
+    skipped : dict
+        Methods known to be unavailable, with the reason.
+    write_images : callable or None
+        ``write_images(task, images)`` stores a finished task's images before its part is written.
+    """
+    parts_dir, errors_dir = out / "parts", out / "errors"
+    ids = [t.cell_id for t in tasks]
     if stale:
         for path in (out / "results.csv",):
             path.unlink(missing_ok=True)
@@ -553,11 +615,10 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
             path.unlink()
 
     execution_config = {
-        **executor.describe(), "threads_per_worker": threads,
-        "cache_dir": portable_path(cache_dir) if cache_dir is not None else None,
-        "plugins": list(plugins), "allow_failures": execution.allow_failures,
+        **executor.describe(), "threads_per_worker": threads, **execution_info,
+        "allow_failures": execution.allow_failures,
     }
-    write_json(out / "config.json", {"sweep": sweep_config, "execution": execution_config})
+    write_json(out / "config.json", {**config, "execution": execution_config})
 
     done: dict[str, str] = {}
     for cid in ids:
@@ -582,7 +643,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     watch = None if remote else LoadWatch(threads * executor.workers, side_by_side=executor.workers > 1)
     run = collect(executor=executor.describe(), threads_per_worker=threads, start=now_iso(),
                   contended=None if remote else executor.workers > 1)
-    run["sweep"] = spec.name
+    run.update(run_info)
     run["previous_runs"] = history
     write_json(out / "metadata.json", run)
 
@@ -590,11 +651,11 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     n_simulated: dict[str, int] = {}
     crashed: dict[str, str] = {}
     observed_threads: set[int] = set()
-    skipped: dict[str, str] = dict(resolved["unavailable"])
+    skipped = dict(skipped)
     from tqdm import tqdm
 
     n_done_failed = sum(1 for s in done.values() if s == ERROR)
-    bar = tqdm(total=len(tasks), initial=len(done), unit="cell", desc=f"{spec.name} sweep",
+    bar = tqdm(total=len(tasks), initial=len(done), unit="cell", desc=label,
                disable=(None if execution.progress is None else not execution.progress),
                file=sys.stderr, dynamic_ncols=True)
 
@@ -605,12 +666,12 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     postfix()
     try:
         with (executor if todo else contextlib.nullcontext()):
-            for task, result in (executor.run(run_cell, todo) if todo else ()):
+            for task, result in (executor.run(run_fn, todo) if todo else ()):
                 if isinstance(result, BaseException):
                     crashed[task.cell_id] = one_line(result)
                 else:
-                    if result.images:  # before the part: a finished cell always has its images
-                        _write_images(out / "images", spec.axis, task.cell, result.images)
+                    if result.images and write_images is not None:  # before the part: a finished cell has its images
+                        write_images(task, result.images)
                     write_part(parts_dir, task.cell_id, result.rows)
                     if result.failures:
                         text = "\n".join(f"== {k} ==\n{v}" for k, v in result.failures.items())
@@ -642,8 +703,7 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
         out_dir=out, results_path=results_path, n_cells=len(tasks), n_ok=len(done) - n_failed,
         n_failed=n_failed, n_missing=n_missing, n_computed=n_computed, n_cache_hits=n_hits,
         skipped=skipped, allow_failures=execution.allow_failures,
-        seconds=time.perf_counter() - t_start, time_split=split,
-        simulated=n_simulated, history_s=resolved["history_s"], use_cache=cache_dir is not None,
+        seconds=time.perf_counter() - t_start, time_split=split, simulated=n_simulated,
     )
     run = finish(run, cells_total=len(tasks), cells_computed=n_computed, cells_failed=n_failed,
                  cells_missing=n_missing, crashed=crashed, recording_cache_hits=n_hits,

@@ -10,6 +10,10 @@ Inputs (in ``RESULTS_DIR``; each optional, at least one of the first two)
     ``config.json``, ``metadata.json``  what ran and where (shown on the title page)
     ``images/``                reconstructions for the figure grid (below)
 
+A folder written by ``python -m bench.dataset`` (``config.json`` holds ``dataset``) gets the dataset
+report of :mod:`bench.dataset_report` instead: the protocol first, a table per recording and method,
+and a contact sheet per recording.
+
 Outputs (into ``RESULTS_DIR``, or ``--out``; every file written atomically)
     ``figures/<axis>_psnr_ssim.png``, ``figures/<axis>_affine.png``  metrics against each swept axis
     ``figures/grid_<scene>_<axis>.png``  reconstruction grid of every scene with images (the PDF
@@ -41,7 +45,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -54,7 +58,6 @@ from neuspike.utils.atomic import write_text
 from neuspike.formats.images import write_png
 from bench.results import tfp_windows
 from bench.claims import claims_markdown, evaluate_claims
-from neuspike.utils.atomic import replacing
 
 #: Resolution of the reconstruction grids' PNGs (each cell about 220 pixels wide).
 GRID_DPI = 100
@@ -95,14 +98,7 @@ def write_image_png(path: str | os.PathLike, image01: np.ndarray) -> Path:
     return write_png(path, image01, clip=False)
 
 
-def _read_gray(path: Path) -> np.ndarray:
-    import matplotlib.image as mpimg
-
-    raw = np.asarray(mpimg.imread(path))  # PNGs come back as floats in [0, 1]; other formats as integers
-    im = raw / np.iinfo(raw.dtype).max if raw.dtype.kind in "ui" else raw.astype(np.float64)
-    if im.ndim == 3:
-        im = im[..., :3].mean(axis=2)
-    return im
+_read_gray = figs.read_gray
 
 
 def load_images(images_dir: Path, frame: pd.DataFrame, axis: str) -> dict[str, dict[tuple[str, Any], np.ndarray]]:
@@ -344,6 +340,10 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
     for folder in (out, fig_dir, tab_dir):  # a killed report's temporaries (a half PDF can be 20 MB)
         if folder.is_dir():
             remove_stale_temporaries(folder)
+    if isinstance(inputs.config.get("dataset"), dict):  # a folder of bench.dataset: its own tables and sheets
+        from bench.dataset_report import build_dataset_report
+
+        return build_dataset_report(inputs, out, provenance=title_blocks(replace(inputs, results=None)))
     written: list[Path] = []
     figure_pages: list[Any] = []
     table_pages: list[Any] = []
@@ -490,10 +490,4 @@ def _timing_pages(t: pd.DataFrame) -> list[Any]:
     return pages
 
 
-def _write_pdf(path: Path, pages: Sequence[Any]) -> None:
-    from matplotlib.backends.backend_pdf import PdfPages
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with replacing(path) as tmp, PdfPages(tmp, metadata={"Creator": "NeuSpike Bench", "CreationDate": None}) as pdf:
-        for page in pages:
-            pdf.savefig(page)
+_write_pdf = figs.write_pdf

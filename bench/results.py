@@ -27,6 +27,17 @@ Columns (:data:`COLUMNS`)
 ``sim_seconds``     wall time of the cell's simulation (every stage, both modalities), from the
                     recording's metadata, so a cached recording reports the time it originally took
 ``stage_seconds``   JSON object ``{"modality:name": seconds}`` for every stage that ran
+``time_s``          the reconstruction instant in the recording's sensor seconds (rows of a dataset,
+                    :mod:`bench.datasets`); empty for simulated cells
+``instant``         the instant's index among its recording's instants (datasets); empty otherwise
+``reference``       the ground-truth file a dataset row was scored against, as the manifest names it;
+                    empty where there is none (no-reference measures) and for simulated cells
+
+Rows of a dataset (:mod:`bench.datasets`) hold a recording instead of a simulated cell: ``scene`` is
+the recording's name, ``kind`` its inputs (``spikes``, ``events`` or ``events+spikes``), ``image``
+its files, ``planes`` the spike window; ``light``, ``motion``, ``seed`` and ``noise`` are empty
+(nothing was simulated), and the metrics are the full-reference ones where a ground truth exists
+and the no-reference ones (``noise_sigma``, ``laplacian_var``) always.
 
 Timing columns (:data:`TIMING_COLUMNS`) are measurements of one run on one machine and differ between
 any two runs; everything else is a deterministic function of the configuration and the seeds.
@@ -55,25 +66,26 @@ COLUMNS: tuple[str, ...] = (
     "light", "motion", "noise", "effects", "seed",
     "method", "inputs", "recurrent", "parameters", "normalisation", "method_params",
     "metric", "value", "status", "error",
-    "ms_per_frame", "sim_seconds", "stage_seconds",
+    "ms_per_frame", "sim_seconds", "stage_seconds", "time_s", "instant", "reference",
 )
 #: Columns that hold run-dependent measurements of time.
 TIMING_COLUMNS: tuple[str, ...] = ("ms_per_frame", "sim_seconds", "stage_seconds")
 #: Columns added after the first results were published; read as empty when absent.
-OPTIONAL_COLUMNS: tuple[str, ...] = ("method_params",)
+OPTIONAL_COLUMNS: tuple[str, ...] = ("method_params", "time_s", "instant", "reference")
 #: The ``implementation`` of TFP in a method's description.
 TFP_IMPLEMENTATION = "baselines.tfp.TFP"
 #: The order of rows in ``results.csv``.
-SORT_COLUMNS: tuple[str, ...] = ("scene", "noise", "light", "motion", "seed", "method", "metric")
+SORT_COLUMNS: tuple[str, ...] = ("scene", "noise", "light", "motion", "seed", "time_s", "method", "metric")
 #: Row statuses.
 OK, ERROR, SKIPPED = "ok", "error", "skipped"
 
 _DTYPES: Mapping[str, Any] = {
     "cell": str, "scene": str, "kind": str, "image": str, "width": "int64", "height": "int64",
-    "planes": "int64", "light": "float64", "motion": "int64", "noise": str, "effects": str,
-    "seed": "int64", "method": str, "inputs": str, "recurrent": bool, "parameters": "int64",
+    "planes": "int64", "light": "float64", "motion": "Int64", "noise": str, "effects": str,
+    "seed": "Int64", "method": str, "inputs": str, "recurrent": bool, "parameters": "int64",
     "normalisation": str, "method_params": str, "metric": str, "value": "float64", "status": str, "error": str,
     "ms_per_frame": "float64", "sim_seconds": "float64", "stage_seconds": str,
+    "time_s": "float64", "instant": "Int64", "reference": str,
 }
 _TEXT = [c for c, t in _DTYPES.items() if t is str]
 
@@ -112,7 +124,7 @@ def read_csv(path: str | os.PathLike) -> pd.DataFrame:
                         na_values={c: [""] for c in _DTYPES if _DTYPES[c] is not str})
     for column in OPTIONAL_COLUMNS:  # results written before the column existed
         if column not in frame.columns:
-            frame[column] = ""
+            frame[column] = "" if _DTYPES[column] is str else np.nan
     missing = set(COLUMNS) - set(frame.columns)
     if missing:
         raise ValueError(f"{path}: missing result columns {sorted(missing)}")

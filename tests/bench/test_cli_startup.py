@@ -10,7 +10,7 @@ from tests.cli_probe import probe
 HEAVY = ("torch", "pandas", "matplotlib", "cv2", "numba")
 
 COMMANDS = ("bench.sweep", "bench.noise", "bench.timing", "bench.report", "bench.merge", "bench.video",
-            "bench.method_speed", "bench.simulator_speed", "bench.fast_motion")
+            "bench.method_speed", "bench.simulator_speed", "bench.fast_motion", "bench.dataset")
 
 
 @pytest.mark.parametrize("module", COMMANDS)
