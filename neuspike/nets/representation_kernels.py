@@ -7,10 +7,12 @@ the NumPy reference's, operation for operation (:mod:`neuspike.nets.representati
 results are equal bit for bit.
 
 Sliding (:func:`advance_spikes`, :func:`assemble_spikes`, :func:`advance_events`,
-:func:`assemble_events`): each new plane and each new event is binned once into per-plane prefix
-maps held in rings of ``T + 1`` planes (spike count before plane k; signed event count before plane
-k; each pixel's recent spike planes); a frame's representation is differences of those maps at its
-group edges and a look-up of the spikes that bracket each centre (:mod:`neuspike.nets.sliding`).
+:func:`assemble_events`): each new plane and each new event is binned once into per-plane maps held
+in rings of ``T + 1`` planes (spike count before plane k; last spike before plane k; first spike at
+or after plane k within the chunk of planes it arrived with; signed event count before plane k); a
+frame's representation is differences of the count maps at its group edges and, at each centre,
+the last-spike map and the first-spike maps of its chunk and the later ones (:mod:`neuspike.nets.sliding`).
+Every read is a whole row of a map, so the assembly streams through memory.
 
 Import this module only where numba is importable (see :func:`neuspike.utils.parallel.resolve_backend`).
 """
@@ -131,60 +133,83 @@ def counts_to_contrast(counts, theta, out):
                 out[b, r, c] = np.float32(np.float64(counts[b, r, c]) * theta)
 
 
-@njit(parallel=True, **_JIT)
-def advance_spikes(u8, k0, cnt_ring, running, times):
-    """Bin new planes once: plane ``k0 + j`` is ``u8[j]`` (n, H, W) uint8.
+#: "No spike known yet" in the first-spike ring.
+NONE = np.int32(2**31 - 1)
 
-    ``running`` (H, W) int64: spikes so far per pixel; after plane k, ``cnt_ring[(k + 1) % R]`` holds
-    it (uint32: a pixel's count is exact below 2**32 spikes, over a day of planes at 20 kHz). Spike
-    number n of a pixel is stored at ``times[y, x, n % cap]`` (its absolute plane, int64), so the
-    last ``cap`` spikes of every pixel are at hand.
+
+@njit(parallel=True, **_JIT)
+def advance_spikes(u8, k0, cnt_ring, last_ring, first_ring, running, last):
+    """Bin the new planes ``k0 .. k0 + n - 1`` (``u8`` (n, H, W) uint8) once, as one chunk.
+
+    Rings of R maps, plane k in slot ``k % R``: ``cnt_ring`` (uint32) the spikes before plane k;
+    ``last_ring`` (int32) the last spike plane before k (from ``last``, the running one, -2**31 + 1
+    for none); ``first_ring`` (int32) the first spike plane at or after k *within this chunk*
+    (:data:`NONE` if none): a forward pass writes the first two, a backward pass the third.
+    ``running`` (H, W) int64 and ``last`` (H, W) int32 carry on to the next chunk.
     """
     n_new, h, w = u8.shape
     ring = cnt_ring.shape[0]
-    cap = times.shape[2]
     for r in prange(h):
         for j in range(n_new):
             k = k0 + j
             row = u8[j, r]
-            dst = cnt_ring[(k + 1) % ring, r]
+            cnt = cnt_ring[(k + 1) % ring, r]
+            lst = last_ring[(k + 1) % ring, r]
             for c in range(w):
-                if row[c]:
-                    times[r, c, running[r, c] % cap] = k
-                    running[r, c] += 1
-                dst[c] = np.uint32(running[r, c] & 0xFFFFFFFF)
+                s = row[c]
+                running[r, c] += s
+                last[r, c] = np.int32(k) if s else last[r, c]
+                cnt[c] = np.uint32(running[r, c] & 0xFFFFFFFF)
+                lst[c] = last[r, c]
+        for j in range(n_new - 1, -1, -1):
+            k = k0 + j
+            row = u8[j, r]
+            dst = first_ring[k % ring, r]
+            if j == n_new - 1:
+                for c in range(w):
+                    dst[c] = np.int32(k) if row[c] else NONE
+            else:
+                nxt = first_ring[(k + 1) % ring, r]
+                for c in range(w):
+                    dst[c] = np.int32(k) if row[c] else nxt[c]
 
 
 @njit(parallel=True, **_JIT)
-def assemble_spikes(cnt_ring, times, ws, edges, centres, gain, out):
-    """The window ``[ws, ws + T)`` (T = edges[-1]) from the prefix rings: as :func:`spike_window`."""
+def assemble_spikes(cnt_ring, last_ring, first_ring, ws, edges, centres, chunk_slots, centre_chunk, gain, out):
+    """The window ``[ws, ws + T)`` (T = edges[-1]) from the rings: as :func:`spike_window`.
+
+    ``chunk_slots`` (M,) int64: the ring slots of the starts of the chunks that cover the window, in
+    time order; ``centre_chunk`` (C,) int64: the chunk of each centre. The next spike at or after a
+    centre is its chunk's first-spike entry, else the first spike of the earliest later chunk that has one.
+    """
     ring = cnt_ring.shape[0]
-    cap = times.shape[2]
     n_groups = edges.shape[0] - 1
     n_centres = centres.shape[0]
+    n_chunks = chunk_slots.shape[0]
     t_len = edges[n_groups]
     _, h, w = cnt_ring.shape
+    edge_slot = (ws + edges) % ring  # ring slots, once per frame
+    centre_slot = (ws + centres) % ring
     for r in prange(h):
-        first = cnt_ring[ws % ring, r]
-        end = cnt_ring[(ws + t_len) % ring, r]
         for g in range(n_groups):
-            a = cnt_ring[(ws + edges[g]) % ring, r]
-            z = cnt_ring[(ws + edges[g + 1]) % ring, r]
+            a = cnt_ring[edge_slot[g], r]
+            z = cnt_ring[edge_slot[g + 1], r]
             length = np.float32(edges[g + 1] - edges[g])
             for c in range(w):
                 out[g, r, c] = (np.float32(np.uint32(z[c] - a[c])) / length) / gain
         for k in range(n_centres):
-            at = cnt_ring[(ws + centres[k]) % ring, r]
+            lst = last_ring[centre_slot[k], r]
+            fst = first_ring[centre_slot[k], r]
             for c in range(w):
-                n_c = np.int64(at[c])
-                before = np.int64(np.uint32(at[c] - first[c]))  # spikes in [ws, centre)
-                after = np.int64(np.uint32(end[c] - at[c]))  # spikes in [centre, ws + T)
-                prev = -t_len
-                nxt = 2 * t_len
-                if before > 0:  # the last spike before the centre is spike number n_c - 1
-                    prev = times[r, c, (n_c - 1) % cap] - ws
-                if after > 0:  # the first one at or after it is spike number n_c
-                    nxt = times[r, c, n_c % cap] - ws
+                prev = np.int64(lst[c]) - ws
+                if prev < 0:  # no spike in [ws, centre)
+                    prev = -t_len
+                v = fst[c]
+                j = centre_chunk[k] + 1
+                while v == NONE and j < n_chunks:
+                    v = first_ring[chunk_slots[j], r, c]
+                    j += 1
+                nxt = 2 * t_len if v == NONE else np.int64(v) - ws
                 out[n_groups + k, r, c] = (np.float32(1.0) / np.float32(nxt - prev)) / gain
 
 
@@ -204,9 +229,10 @@ def assemble_events(ev_ring, ws, bin_planes, counts):
     """Signed counts of ``counts.shape[0]`` bins of ``bin_planes`` planes from plane ``ws``: ring differences."""
     ring = ev_ring.shape[0]
     n, h, w = counts.shape
+    slot = (ws + np.arange(n + 1) * bin_planes) % ring
     for r in prange(h):
         for b in range(n):
-            a = ev_ring[(ws + b * bin_planes) % ring, r]
-            z = ev_ring[(ws + (b + 1) * bin_planes) % ring, r]
+            a = ev_ring[slot[b], r]
+            z = ev_ring[slot[b + 1], r]
             for c in range(w):
                 counts[b, r, c] = z[c] - a[c]

@@ -4,14 +4,15 @@ Neighbouring frames of a video share most of their window (at 1,000 frames/s and
 240 of 256 planes). :class:`SlidingRepresentation` keeps, over the planes of the current window,
 
 * the spike count of every pixel before each plane (a ring of ``T + 1`` uint32 maps),
-* the plane of each pixel's last ``T`` spikes (a ring per pixel), and
+* the last spike of every pixel before each plane, and the first one at or after each plane among
+  the planes that arrived with it (rings of ``T + 1`` int32 maps), and
 * the signed event count of every pixel before each plane (a ring of ``T + 1`` int32 maps),
 
 and advances them by the planes and events that are new since the previous frame, once each
 (:mod:`neuspike.nets.representation_kernels`). A frame's representation is then assembled from
 those shared bins: a group's count is the difference of two prefix maps, the interval at a centre
-comes from the spikes numbered just before and at the centre's prefix count, and an event bin is
-the difference of two event prefix maps. The result equals the per-frame representation
+is read from the last-spike map at the centre and the first-spike maps of the centre's chunk of
+planes and the later chunks, and an event bin is the difference of two event prefix maps. The result equals the per-frame representation
 (:func:`neuspike.nets.representations.spike_representation` and ``event_representation``) exactly,
 bit for bit; ``tests/neuspike/nets/test_sliding.py`` checks it frame by frame.
 
@@ -112,8 +113,11 @@ class SlidingRepresentation:
         t, h, w = planes.shape
         self._shape = (t, h, w)
         self._cnt = np.zeros((t + 1, h, w), np.uint32)
+        self._last = np.zeros((t + 1, h, w), np.int32)
+        self._first = np.zeros((t + 1, h, w), np.int32)
         self._running = np.zeros((h, w), np.int64)
-        self._times = np.zeros((h, w, t), np.int32)
+        self._last_now = np.full((h, w), np.iinfo(np.int32).min + 1, np.int32)
+        self._chunks: list[int] = []  # first plane of each chunk of planes binned together
         self._hi = ws
         self._split: dict[int, float] = {}
         self._ev_ok = (self.event_kind == "contrast" and sample.events is not None and t % reps.CHANNELS == 0)
@@ -134,7 +138,9 @@ class SlidingRepresentation:
             return
         new = sample.spikes.planes[self._hi - ws:]
         u8 = new.view(np.uint8) if new.dtype == np.bool_ else (new != 0).view(np.uint8)
-        k.advance_spikes(np.ascontiguousarray(u8), self._hi, self._cnt, self._running, self._times)
+        k.advance_spikes(np.ascontiguousarray(u8), self._hi, self._cnt, self._last, self._first, self._running,
+                         self._last_now)
+        self._chunks.append(self._hi)
         if self._ev_ok:
             rate = sample.spikes.plane_rate_hz
             splits_t = np.empty(we - self._hi + 1)
@@ -152,6 +158,8 @@ class SlidingRepresentation:
                 self._split[self._hi + j] = float(splits_t[j])
             for key in [key for key in self._split if key < ws]:
                 del self._split[key]
+        live = [i for i, a in enumerate(self._chunks) if a > ws]  # chunks that still reach into the window
+        self._chunks = self._chunks[max(0, live[0] - 1 if live else len(self._chunks) - 1):]
         self._hi = we
 
     # ------------------------------------------------------------------ assembly
@@ -159,8 +167,11 @@ class SlidingRepresentation:
         from neuspike.nets import representation_kernels as k
 
         edges, centres = reps._edges_centres(t, self.spike_kind)
+        starts = np.asarray(self._chunks, np.int64)
+        centre_chunk = np.searchsorted(starts, ws + centres, side="right").astype(np.int64) - 1
         out = np.empty((reps.CHANNELS, *self._shape[1:]), np.float32)
-        k.assemble_spikes(self._cnt, self._times, ws, edges, centres, np.float32(gain), out)
+        k.assemble_spikes(self._cnt, self._last, self._first, ws, edges, centres, starts % (t + 1), centre_chunk,
+                          np.float32(gain), out)
         return out
 
     def _assemble_events(self, sample: Sample, ws: int, t: int) -> np.ndarray:
