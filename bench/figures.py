@@ -239,7 +239,7 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "",
             ax.scatter([r.ms_per_frame], [getattr(r, metric)], color=st["color"], marker=st["marker"],
                        s=70 if on else 40, edgecolors="black" if on else "none", linewidths=1.2, zorder=3,
                        label=r.method)
-            stream = float(getattr(r, "stream_ms", math.nan))
+            stream = pd.to_numeric(getattr(r, "stream_ms", math.nan), errors="coerce")  # empty in a CSV read back
             if math.isfinite(stream) and stream > 0:
                 # the same method's second cost: one new frame of a running video (hollow, joined)
                 ax.plot([r.ms_per_frame, stream], [getattr(r, metric)] * 2, color=st["color"], lw=0.8, ls=":",
@@ -258,7 +258,7 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "",
         if len(pts):
             lo, hi = pts["ms_per_frame"].min(), pts["ms_per_frame"].max()
             if "stream_ms" in pts:
-                lo = min(lo, float(np.nanmin(np.r_[pts["stream_ms"].to_numpy(float), lo])))
+                lo = min(lo, float(np.nanmin(np.r_[pd.to_numeric(pts["stream_ms"], errors="coerce").to_numpy(float), lo])))
             ax.set_xlim(lo / 2.5, hi * 6.0)
             ys = pts[metric].to_numpy(float)
             pad = 0.08 * (ys.max() - ys.min()) if ys.max() > ys.min() else 0.5
