@@ -147,8 +147,9 @@ class NeuSpikeNetMethod(LearnedMethod):
             self._streaming = False
 
     def reset(self) -> None:
+        """Start a new sequence; the sliding bins survive only the reset inside a streamed frame's call."""
         super().reset()
-        if getattr(self, "_sliding", None) is not None:
+        if getattr(self, "_sliding", None) is not None and not getattr(self, "_streaming", False):
             self._sliding.reset()
 
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:

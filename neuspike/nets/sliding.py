@@ -69,6 +69,8 @@ class SlidingRepresentation:
         self.event_threshold = event_threshold
         #: ``"sliding"`` or ``"whole"``: how the last frame was computed
         self.last_mode: str | None = None
+        #: How many times the rings started afresh from a whole window (once per run of frames)
+        self.starts = 0
         self.reset()
 
     def reset(self) -> None:
@@ -109,6 +111,7 @@ class SlidingRepresentation:
     # ------------------------------------------------------------------ rings
     def _start(self, sample: Sample, ws: int) -> None:
         """Start the rings at plane ``ws`` and bin the sample's whole window."""
+        self.starts += 1
         planes = sample.spikes.planes
         t, h, w = planes.shape
         self._shape = (t, h, w)

@@ -62,6 +62,8 @@ def test_sliding_representations_equal_the_per_frame_reference_bit_for_bit(folde
             np.testing.assert_array_equal(x_t, reps.spike_representation(sample, spike_kind, backend="numpy"))
             np.testing.assert_array_equal(x_m, reps.event_representation(sample, "contrast", backend="numpy"))
     assert modes.count("sliding") == len(modes)
+    overlapping = kind in ("1000 fps (20 planes)", "every plane", "1250 fps (16 planes)")
+    assert sliding.starts == 1 if overlapping else sliding.starts > 1
 
 
 def test_an_unknown_gain_is_estimated_alike_when_sliding(folder):
@@ -111,7 +113,12 @@ def test_streamed_images_equal_single_frame_reconstructions(folder, name, one_to
         for sample, (t, image) in zip(stream_samples(rec, times), streamed):
             assert t == sample.key_time_s
             np.testing.assert_array_equal(image, single.reconstruct(sample))
-    assert method._sliding.last_mode == "sliding"
+    # one start from a whole window, then every frame from the bins shared with the previous ones
+    assert method._sliding.last_mode == "sliding" and method._sliding.starts == 1
+    method.reset()  # a new sequence starts the bins afresh
+    with _open(folder) as rec:
+        list(reconstruct_video(method, rec, times[:2]))
+    assert method._sliding.starts == 2
 
 
 def test_a_window_shifted_at_the_recording_end_is_refused(folder, one_torch_thread):
