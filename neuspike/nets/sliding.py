@@ -41,6 +41,7 @@ import numpy as np
 from neuspike.errors import InputError
 from neuspike.nets import representations as reps
 from neuspike.sample import Sample
+from neuspike.utils.parallel import KERNEL_LOCK
 
 __all__ = ["SlidingRepresentation"]
 
@@ -74,7 +75,8 @@ class SlidingRepresentation:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the rings (a new recording or a jump)."""
+        """Forget the rings (a new recording or a jump) and free them."""
+        self._cnt = self._last = self._first = self._ev = None
         self._shape: tuple[int, int, int] | None = None
         self._hi = -1  # planes [.., hi) are binned
         self._ev_ok = False
@@ -141,8 +143,9 @@ class SlidingRepresentation:
             return
         new = sample.spikes.planes[self._hi - ws:]
         u8 = new.view(np.uint8) if new.dtype == np.bool_ else (new != 0).view(np.uint8)
-        k.advance_spikes(np.ascontiguousarray(u8), self._hi, self._cnt, self._last, self._first, self._running,
-                         self._last_now)
+        with KERNEL_LOCK:
+            k.advance_spikes(np.ascontiguousarray(u8), self._hi, self._cnt, self._last, self._first, self._running,
+                             self._last_now)
         self._chunks.append(self._hi)
         if self._ev_ok:
             rate = sample.spikes.plane_rate_hz
@@ -156,7 +159,8 @@ class SlidingRepresentation:
             # this window: the sample holds every event after it
             ev = sample.events
             idx = np.searchsorted(ev.t_s, splits_t, side="left").astype(np.int64)
-            k.advance_events(ev.t_s, ev.x, ev.y, ev.p, idx, self._hi, self._ev, self._ev_running)
+            with KERNEL_LOCK:
+                k.advance_events(ev.t_s, ev.x, ev.y, ev.p, idx, self._hi, self._ev, self._ev_running)
             for j in range(1, we - self._hi + 1):
                 self._split[self._hi + j] = float(splits_t[j])
             for key in [key for key in self._split if key < ws]:
@@ -173,8 +177,9 @@ class SlidingRepresentation:
         starts = np.asarray(self._chunks, np.int64)
         centre_chunk = np.searchsorted(starts, ws + centres, side="right").astype(np.int64) - 1
         out = np.empty((reps.CHANNELS, *self._shape[1:]), np.float32)
-        k.assemble_spikes(self._cnt, self._last, self._first, ws, edges, centres, starts % (t + 1), centre_chunk,
-                          np.float32(gain), out)
+        with KERNEL_LOCK:
+            k.assemble_spikes(self._cnt, self._last, self._first, ws, edges, centres, starts % (t + 1), centre_chunk,
+                              np.float32(gain), out)
         return out
 
     def _assemble_events(self, sample: Sample, ws: int, t: int) -> np.ndarray:
@@ -183,11 +188,13 @@ class SlidingRepresentation:
         bins = reps.CHANNELS
         per = t // bins
         counts = np.empty((bins, *self._shape[1:]), np.int32)
-        k.assemble_events(self._ev, ws, per, counts)
+        with KERNEL_LOCK:
+            k.assemble_events(self._ev, ws, per, counts)
         _correct_boundaries(counts, sample, [self._split[ws + j * per] for j in range(bins + 1)])
         theta = self.event_threshold or sample.event_threshold or reps.NOMINAL_EVENT_THRESHOLD
         out = np.empty(counts.shape, np.float32)
-        k.counts_to_contrast(counts, float(theta), out)
+        with KERNEL_LOCK:
+            k.counts_to_contrast(counts, float(theta), out)
         return out
 
 
