@@ -360,12 +360,27 @@ class FireNet(LearnedMethod):
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         carried = getattr(self, "_carried", None)
         if getattr(self, "_next_from", None) is not None and carried is not None and carried[0] is self._state:
+            seen = self.windows_seen
             image = self._continue(sample, *carried)
             if image is not None:
-                return image, self.output_label
+                self.windows_seen = seen + self._committed
+                return image, self._warm_up_label()
         image, label = super()._reconstruct(sample)
         self._carried = (self._state, sample.key_time_s, image)
-        return image, label
+        self.windows_seen = self.last_steps
+        return image, self._warm_up_label(label)
+
+    #: Windows the current state has stepped through since its reset (``max_windows`` or more: fully warmed up).
+    windows_seen: int = 0
+
+    def _warm_up_label(self, label: str | None = None) -> str:
+        """The read-out's label, saying so when the state rests on fewer than ``max_windows`` windows
+        (a frame near the start of the events, whose history is short)."""
+        label = self.output_label if label is None else label
+        most = self.params["max_windows"]
+        if self.windows_seen < most:
+            label = f"{label}; short history: warmed up on {self.windows_seen} of {most} windows"
+        return label
 
     def _continue(self, sample: Sample, state: Any, t0: float, image: np.ndarray) -> np.ndarray | None:
         key, ev, h, w = sample.key_time_s, sample.events, sample.height, sample.width
@@ -389,6 +404,7 @@ class FireNet(LearnedMethod):
             t1 = float(ev.t_s[b]) if b < i1 else key
             image, t0 = step(a, b, t0, t1), t1
         self._carried = (self._state, t0, image)
+        self._committed = full
         self.last_steps = full
         if i0 + full * per < i1:  # the partial window: stepped, not committed
             committed = self._state

@@ -354,7 +354,8 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
             _report_results(inputs, f, fig_dir, tab_dir, written, figure_pages, table_pages, claim_pages, spread)
         points = None
         if inputs.accuracy is not None and len(inputs.accuracy):
-            points = tb.with_fronts(inputs.accuracy[["method", "family", "ms_per_frame", "psnr", "ssim"]])
+            keep = [c for c in ("method", "family", "ms_per_frame", "psnr", "ssim", "stream_ms") if c in inputs.accuracy]
+            points = tb.with_fronts(inputs.accuracy[keep])
         elif f is not None and len(f):
             points = tb.accuracy_points(f)
         if points is not None and len(points):

@@ -601,6 +601,26 @@ def timing_markdown(timing: pd.DataFrame, threads: Any = None, machine: str = ""
                      + markdown_table(["method", "resolution", "GFLOP / step", "ms / frame", "FLOP-bound ms",
                                        "GFLOP/s", "of the matmul rate"], lrows,
                                       ["l", "l", "r", "r", "r", "r", "r"]))
+    streamed = timing.iloc[:0]
+    if len(timing) and "stream_ms" in timing:
+        numeric = timing.assign(**{c: pd.to_numeric(timing[c], errors="coerce")
+                                   for c in ("cold_ms", "stream_ms", "stream_min_ms", "stream_max_ms", "stream_steps",
+                                             "steps")})
+        streamed = numeric[(numeric["status"] == OK) & numeric["stream_ms"].notna()]
+    if len(streamed):
+        srows = [[r.method, r.resolution,
+                  fmt(r.cold_ms, "ms") + (f" ({r.steps:.0f} steps)" if r.steps == r.steps else ""),
+                  f"{fmt(r.stream_ms, 'ms')} [{fmt(r.stream_min_ms, 'ms')}-{fmt(r.stream_max_ms, 'ms')}]"
+                  + (f" ({r.stream_steps:.1f} steps)" if r.stream_steps == r.stream_steps else ""),
+                  f"{r.cold_ms / r.stream_ms:.1f}x"] for r in streamed.itertuples()]
+        parts.append("\nTwo costs of the methods that continue a video from their previous frame: the **cold start** "
+                     "(one whole reconstruct call; a recurrent method warms up over the event history, every "
+                     "network step included) and **streaming**, one new frame of a running video at "
+                     "1,000 frames/s of sensor time (recurrent methods carry their state and step only the event "
+                     "windows completed since the previous frame plus the partial one; NeuSpike-Net assembles "
+                     "its representations from bins shared with the previous frames). Median [min-max] ms:\n\n"
+                     + markdown_table(["method", "resolution", "cold start ms", "streaming ms per new frame",
+                                       "cold / streaming"], srows, ["l", "l", "r", "r", "r"]))
     bad = timing[timing["status"] != OK].drop_duplicates(["method", "error"]) if len(timing) else timing
     if len(bad):
         parts.append("\nNot timed:\n\n" + "".join(f"- {r.method} ({r.status}): {r.error}\n" for r in bad.itertuples()))

@@ -9,10 +9,19 @@ then reconstructs from it: ``--warmup`` untimed calls, then ``--repeats`` timed 
 ``reset()`` (outside the timed region). Reported: the median and the spread (min, max, quartiles)
 of the timed calls, torch's thread count, and the method's learned parameter count.
 
-Recurrent methods (FireNet) warm up on the event history inside every call; their ms per frame is
-the cost of one network step, the call's time divided by the event windows it processed
+Recurrent methods (FireNet, E2VID) warm up on the event history inside every call; their ms per
+frame is the cost of one network step, the call's time divided by the event windows it processed
 (``last_steps``), as in the paper's Table 2 (one inference per voxel grid). The whole call is
 kept in ``median_ms``.
+
+Two honest costs for methods that continue a video from their previous frame (they override
+``reconstruct_next``: the recurrent ones carry their state, NeuSpike-Net slides its
+representations): ``cold_ms``, one whole call (the cold start: a recurrent method's warm-up over the
+event history included), and ``stream_ms``, one new frame of a running video at
+:data:`bench.timer.STREAM_FPS` (1,000) frames per second of sensor time, timed on consecutive frames
+of the representative scene simulated as one continuous recording (``stream_steps``: network steps
+per new frame). Table 2 lists both, labelled, and the accuracy-versus-time chart draws such a method
+twice: filled at its cold start, hollow at its streaming cost.
 
 A method that cannot run (e.g. FireNet without weights: ``MethodUnavailable``) or fails is a row
 with its status and reason, not a crash.

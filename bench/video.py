@@ -22,6 +22,12 @@ method; a method reads only the modalities it needs) and
 ``tfp (single-frame calls)`` (TFP through :func:`neuspike.formats.samples.load_sample` once per frame,
 as ``python -m neuspike.reconstruct`` would: what streaming with shared windows saves).
 
+Frames: the output instants start half a spike window (6.4 ms) into the recording and the recording
+runs half a window past the last one, so every frame's spike window is centred on it (NeuSpike-Net
+refuses shifted windows) and every method sees the same frames. Learned methods stream (recurrent
+ones carry their state, NeuSpike-Net's representations slide); every learned method with weights
+runs: ours from ``neuspike/trained/``, FireNet's published ones from ``--weights``.
+
 Size of the run: the issue's standard is a 1 s recording (``--full``: 20,000 planes, 1,000 frames per
 method at 1,000 frames/s; about 72 million events for this fan). On two shared cores that takes the
 slow methods (SNM, TFSTP, FireNet) many minutes each, so the default is the first 50 ms of the same
@@ -90,12 +96,22 @@ def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
     if meta_path.is_file():
         meta = json.loads(meta_path.read_text())
         if (meta.get("scene", {}).get("spec") == scene_spec.as_dict() and meta.get("light") == spec.light
-                and meta.get("seed") == spec.seed and meta.get("planes") == round(spec.duration_s * 20_000)):
+                and meta.get("seed") == spec.seed and meta.get("planes") == round(recorded_s(spec) * 20_000)):
             return meta
     scene = make_scene(scene_spec)
     condition = Condition(light=spec.light, motion=128)
     return write_sequence(scene, condition, folder, rng=derive_rng(spec.seed, "bench.video"), start_s=0.0,
-                          duration_s=spec.duration_s, seed=spec.seed, progress=False)
+                          duration_s=recorded_s(spec), seed=spec.seed, progress=False)
+
+
+#: Spike window of every frame (planes at 20,000 planes/s) and the margin it needs at either end.
+WINDOW_PLANES = 256
+MARGIN_S = WINDOW_PLANES / 2 / 20_000.0
+
+
+def recorded_s(spec: VideoBenchSpec) -> float:
+    """Sensor seconds simulated: the frames' span plus half a window at either end."""
+    return spec.duration_s + 2 * MARGIN_S
 
 
 def _row(**fields: Any) -> dict[str, Any]:
@@ -210,7 +226,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
               f"{meta.get('planes')} planes, {meta.get('event_count', 0):,} events ({sim_s:.1f} s)", file=sys.stderr)
         rows: list[dict[str, Any]] = []
         with open_recording(folder) as rec:
-            times = frame_times(0.0, spec.duration_s, spec.fps)
+            times = frame_times(MARGIN_S, MARGIN_S + spec.duration_s, spec.fps)
             truth = ground_truth_for(folder, rec.meta, height=rec.height, width=rec.width, tolerance_s=0.5 / spec.fps)
             rows += measure_references(rec, times, spec, folder)
             bar = None

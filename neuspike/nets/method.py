@@ -3,6 +3,12 @@
 It trains as every learned method does (:mod:`neuspike.train`): ``for_training()`` builds the
 untrained module (:meth:`NeuSpikeNetMethod.build_module`) and :meth:`NeuSpikeNetMethod.encode`
 turns a sample into the module's input tensors.
+
+The network is trained on spike windows centred on the key instant; a window that was shifted to stay
+inside its recording (a frame near either end) is refused, not reconstructed at the window's centre
+(which shows another instant). In a video (:meth:`NeuSpikeNetMethod.reconstruct_next`), the
+representations slide (:class:`neuspike.nets.sliding.SlidingRepresentation`): each plane and event
+is binned once and every frame's input equals its single-frame input exactly.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESEN
                                            spike_gain, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
+from neuspike.nets.sliding import SlidingRepresentation
 
 __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "NeuSpikeNetMethod"]
 
@@ -48,6 +55,21 @@ def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
     return p
 
 
+def check_centred(sample: Sample, name: str | None) -> None:
+    """Refuse a spike window whose centre is more than one plane from the key instant (shifted at a
+    recording's end): the network reconstructs its window's centre, so it would show another instant."""
+    spikes = sample.spikes
+    plane_s = 1.0 / spikes.plane_rate_hz
+    centre = spikes.start_s + spikes.num_planes * plane_s / 2.0
+    off = sample.key_time_s - centre
+    if abs(off) > plane_s * (1 + 1e-6):
+        raise InputError(
+            f"{name or 'neuspike-net'}: the key instant {sample.key_time_s:.6f} s is {abs(off) * 1e3:.2f} ms "
+            f"{'after' if off > 0 else 'before'} the centre of its {spikes.num_planes}-plane spike window (shifted "
+            "to stay inside the recording); the network is trained on centred windows only, so this frame is "
+            "refused: choose instants at least half a window from either end")
+
+
 class NeuSpikeNetMethod(LearnedMethod):
     """NeuSpike-Net (:mod:`neuspike.nets`).
 
@@ -71,6 +93,8 @@ class NeuSpikeNetMethod(LearnedMethod):
     """
 
     inputs = frozenset({"spikes", "events"})
+    #: Shifted spike windows are refused (:func:`check_centred`); the video command keeps to centred ones.
+    needs_centred_window = True
 
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
@@ -101,14 +125,41 @@ class NeuSpikeNetMethod(LearnedMethod):
         p = self.params
         if sample.spikes is None:
             raise InputError("neuspike-net: the sample has no spikes")
-        x_t = torch.from_numpy(spike_representation(sample, p["spike_representation"]))[None]
-        if p["spike_only"]:
-            return [(x_t,)]
-        if sample.events is None:
+        check_centred(sample, self.name)
+        if not p["spike_only"] and sample.events is None:
             raise InputError("neuspike-net: the sample has no events; the fusion network needs spikes and events "
                              "(neuspike-net-spike takes spikes alone)")
-        x_m = torch.from_numpy(event_representation(sample, p["event_representation"]))[None]
-        return [(x_t, x_m)]
+        sliding = getattr(self, "_sliding", None)
+        if getattr(self, "_streaming", False) and sliding is not None:
+            x_t, x_m = sliding(sample)
+        else:
+            x_t = spike_representation(sample, p["spike_representation"])
+            x_m = None if p["spike_only"] else event_representation(sample, p["event_representation"])
+        if p["spike_only"]:
+            return [(torch.from_numpy(x_t)[None],)]
+        return [(torch.from_numpy(x_t)[None], torch.from_numpy(x_m)[None])]
+
+    # -- streaming (neuspike.video): sliding representations ---------------------------------------
+
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> Any:
+        """The image at the sample's key instant, its representations assembled from bins shared with
+        the previous frames (:class:`~neuspike.nets.sliding.SlidingRepresentation`; equal to
+        :meth:`reconstruct`'s input bit for bit, so the image is :meth:`reconstruct`'s)."""
+        if getattr(self, "_sliding", None) is None:
+            p = self.params
+            self._sliding = SlidingRepresentation(p["spike_representation"],
+                                                  None if p["spike_only"] else p["event_representation"])
+        self._streaming = True
+        try:
+            return self.reconstruct(sample)
+        finally:
+            self._streaming = False
+
+    def reset(self) -> None:
+        """Start a new sequence; the sliding bins survive only the reset inside a streamed frame's call."""
+        super().reset()
+        if getattr(self, "_sliding", None) is not None and not getattr(self, "_streaming", False):
+            self._sliding.reset()
 
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)

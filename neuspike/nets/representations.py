@@ -21,6 +21,12 @@ T_event
 The gain (expected spikes per plane per unit radiance) comes from ``sample.spikes.gain``; for a real
 recording without a gain, :func:`spike_gain` takes the one that maps the 99.5th percentile of the
 window's spike rate to radiance 1 and says so (``"estimated"``).
+
+Speed: ``backend="auto"`` (default) computes ``counts``, ``counts_interval`` and ``contrast`` with
+compiled kernels (:mod:`neuspike.nets.representation_kernels`: one pass over the planes, rows in
+parallel, and one over the events) where numba runs, ``"numpy"`` with the NumPy reference below;
+both give the same arrays bit for bit. In a video, :class:`neuspike.nets.sliding.SlidingRepresentation`
+bins each plane and event once and assembles every frame from bins shared with its neighbours.
 """
 
 from __future__ import annotations
@@ -30,6 +36,12 @@ import numpy as np
 from neuspike.errors import InputError
 from neuspike.methods.representations import voxel_grid
 from neuspike.sample import Sample
+from neuspike.utils.parallel import KERNEL_LOCK, resolve_backend
+
+try:  # numba is a dependency, but the representations must still work where it cannot be imported
+    from neuspike.nets import representation_kernels as _kernels
+except ImportError:  # pragma: no cover - exercised only without numba
+    _kernels = None
 
 __all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "SPIKE_REPRESENTATIONS", "event_representation",
            "spike_gain", "spike_representation"]
@@ -40,6 +52,24 @@ SPIKE_REPRESENTATIONS = ("counts", "counts_interval")
 EVENT_REPRESENTATIONS = ("voxel", "contrast")
 #: Contrast threshold assumed by ``"contrast"`` when neither the sample nor the caller gives one.
 NOMINAL_EVENT_THRESHOLD = 0.2
+#: Accepted values of ``backend``: the compiled kernels where numba runs, or the NumPy reference.
+BACKENDS = ("auto", "numba", "numpy")
+#: Rows per parallel band of the spike kernel.
+BAND_ROWS = 8
+
+
+def _kernels_usable(backend: str = "auto") -> bool:
+    return resolve_backend(backend, compiled=_kernels is not None) == "numba"
+
+
+def _edges_centres(t: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """Group edges (G + 1,) and interval centres (C,) of a ``t``-plane window, int64 plane indices."""
+    if kind == "counts":
+        return np.round(np.linspace(0, t, CHANNELS + 1)).astype(np.int64), np.zeros(0, np.int64)
+    if kind == "counts_interval":
+        edges = np.round(np.linspace(0, t, CHANNELS // 2 + 1)).astype(np.int64)
+        return edges, (edges[:-1] + edges[1:]) // 2
+    raise InputError(f"spike representation: expected one of {SPIKE_REPRESENTATIONS}, got {kind!r}")
 
 
 def spike_gain(sample: Sample) -> tuple[float, str]:
@@ -141,10 +171,17 @@ def _pack8(u8: np.ndarray, start: int) -> np.ndarray:
     return byte
 
 
-def spike_representation(sample: Sample, kind: str) -> np.ndarray:
+def spike_representation(sample: Sample, kind: str, *, backend: str = "auto") -> np.ndarray:
     """T_spike of ``sample``: float32 (32, H, W), radiance units (module docstring)."""
     planes = _planes(sample)
+    edges, centres = _edges_centres(planes.shape[0], kind)
     gain, _ = spike_gain(sample)
+    if _kernels_usable(backend):
+        u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+        out = np.empty((CHANNELS, *planes.shape[1:]), np.float32)
+        with KERNEL_LOCK:
+            _kernels.spike_window(np.ascontiguousarray(u8), edges, centres, np.float32(gain), BAND_ROWS, out)
+        return out
     if kind == "counts":
         return _bin_rates(planes, CHANNELS)[0] / np.float32(gain)
     if kind == "counts_interval":
@@ -154,7 +191,8 @@ def spike_representation(sample: Sample, kind: str) -> np.ndarray:
     raise InputError(f"spike representation: expected one of {SPIKE_REPRESENTATIONS}, got {kind!r}")
 
 
-def event_representation(sample: Sample, kind: str, *, event_threshold: float | None = None) -> np.ndarray:
+def event_representation(sample: Sample, kind: str, *, event_threshold: float | None = None,
+                         backend: str = "auto") -> np.ndarray:
     """T_event of ``sample``'s window events: float32 (32, H, W) (module docstring)."""
     if sample.events is None:
         raise InputError("event representation: the sample has no events (this method needs events)")
@@ -167,6 +205,12 @@ def event_representation(sample: Sample, kind: str, *, event_threshold: float | 
         theta = event_threshold or sample.event_threshold or NOMINAL_EVENT_THRESHOLD
         if not len(events):
             return np.zeros((CHANNELS, h, w), np.float32)
+        if _kernels_usable(backend):
+            out = np.empty((CHANNELS, h, w), np.float32)
+            with KERNEL_LOCK:
+                _kernels.contrast_window(events.t_s, events.x, events.y, events.p, float(t0),
+                                         max(t1 - t0, 1e-12), float(theta), out)
+            return out
         b = np.clip(((events.t_s - t0) / max(t1 - t0, 1e-12) * CHANNELS).astype(np.int64), 0, CHANNELS - 1)
         flat = (b * h + events.y.astype(np.int64)) * w + events.x.astype(np.int64)
         out = np.bincount(flat, weights=events.p.astype(np.float64), minlength=CHANNELS * h * w)

@@ -8,7 +8,7 @@ is the command (:mod:`neuspike.video.cli`).
 
 from typing import Any
 
-__all__ = ["VideoRecording", "check_fps", "frame_times", "open_recording", "reconstruct_video", "stream_methods", "stream_samples"]
+__all__ = ["VideoRecording", "centred_span", "check_fps", "needs_centred_window", "frame_times", "open_recording", "reconstruct_video", "stream_methods", "stream_samples"]
 
 
 def __getattr__(name: str) -> Any:

@@ -112,8 +112,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="method to run; repeat the flag or give a comma list (see python -m neuspike.reconstruct --list)")
     p.add_argument("--fps", type=float, default=1000.0,
                    help="output frames per second of sensor time (default: 1000)")
-    p.add_argument("--start", type=float, metavar="SECONDS", help="first instant, sensor seconds (default: recording start)")
-    p.add_argument("--end", type=float, metavar="SECONDS", help="last instant, sensor seconds (default: recording end)")
+    p.add_argument("--start", type=float, metavar="SECONDS", help="first instant, sensor seconds (default: recording start; with a method that needs "
+                        "centred spike windows, e.g. neuspike-net, half a window in)")
+    p.add_argument("--end", type=float, metavar="SECONDS", help="last instant, sensor seconds (default: recording end; half a window before it for such methods)")
     p.add_argument("--play-fps", type=float, default=25.0, help="playback rate of the .mp4 files (default: 25)")
     p.add_argument("--frames", default="png", help="per-frame files: png, npy, png,npy or none (default: png)")
     p.add_argument("--sheet-frames", type=int, default=6, help="instants in the contact sheet (default: 6)")
@@ -203,6 +204,31 @@ def _range(spec: VideoSpec, span: tuple[float, float]) -> tuple[float, float]:
     return start, end
 
 
+def _centred_range(spec: VideoSpec, rec: Any, methods: Sequence[Any], start: float, end: float,
+                   stream: Any) -> tuple[float, float]:
+    """Keep frames whose spike window is centred when a method needs it (NeuSpike-Net): a default
+    end is moved in, with a note; a range the user gave that reaches outside is refused."""
+    from neuspike.video.stream import centred_span, needs_centred_window
+
+    strict = [m.name for m in methods if needs_centred_window(m)]
+    if not strict or rec.spikes_path is None:
+        return start, end
+    lo, hi = centred_span(rec, spec.window_planes)
+    for given, value, inside in (("--start", spec.start_s, start >= lo - 1e-12), ("--end", spec.end_s, end <= hi + 1e-12)):
+        if value is not None and not inside:
+            raise InputError(
+                f"{given} {value:.6f} s: {', '.join(strict)} need(s) the spike window centred on each frame, which "
+                f"holds for instants in [{lo:.6f}, {hi:.6f}) s only (half a window from either end)")
+    new_start, new_end = max(start, lo), min(end, hi)
+    if new_start >= new_end:
+        raise InputError(f"no instant of [{start:.6f}, {end:.6f}) s has a centred spike window, which "
+                         f"{', '.join(strict)} need(s): use [{lo:.6f}, {hi:.6f}) s")
+    if (new_start, new_end) != (start, end):
+        print(f"note: frames limited to [{new_start:.6f}, {new_end:.6f}) s, where the spike window is centred on "
+              f"the frame ({', '.join(strict)} refuse(s) windows shifted at the recording's ends)", file=stream)
+    return new_start, new_end
+
+
 def _history(spec: VideoSpec) -> float:
     """Seconds of event history before each window (``--event-history``, default the single-frame one)."""
     from neuspike.formats.samples import EVENT_HISTORY_S
@@ -244,6 +270,7 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
         inputs = set().union(*(m.inputs for m in methods))
         fps = check_fps(spec.fps, rec, inputs)
         start, end = _range(spec, rec.span_s())
+        start, end = _centred_range(spec, rec, methods, start, end, stream)
         times = frame_times(start, end, fps)
         final = check_writable_folder(spec.out, what="--out", create=False)
         truth = ground_truth_for(rec.folder, rec.meta, height=rec.height, width=rec.width, tolerance_s=0.5 / fps)

@@ -31,6 +31,8 @@ __all__ = [
     "open_recording",
     "frame_times",
     "check_fps",
+    "centred_span",
+    "needs_centred_window",
     "stream_samples",
     "stream_methods",
     "reconstruct_video",
@@ -83,6 +85,35 @@ def check_fps(fps: float, recording: VideoRecording, inputs: Iterable[str]) -> f
             "method cannot make more frames than the sensor made planes (event-only methods can)"
         )
     return fps
+
+
+def needs_centred_window(method: Any) -> bool:
+    """Whether ``method`` refuses spike windows shifted off their key instant (``needs_centred_window``)."""
+    return bool(getattr(method, "needs_centred_window", False))
+
+
+def centred_span(recording: VideoRecording, window_planes: int | None = None) -> tuple[float, float]:
+    """The instants whose spike window is centred on them and lies inside the file: ``[lo, hi)`` seconds.
+
+    A window of N planes around the key plane K spans planes ``K - N // 2 .. K - N // 2 + N - 1``;
+    it lies inside a file of P planes for ``N // 2 <= K <= P - N + N // 2``. Elsewhere the cut
+    shifts the window (:mod:`neuspike.formats.samples`), which methods trained on centred windows
+    refuse (:func:`needs_centred_window`).
+
+    Raises
+    ------
+    InputError
+        A recording without spikes, or one shorter than the window.
+    """
+    if recording.spikes_path is None:
+        raise InputError("centred_span: the recording has no spikes")
+    n = recording.default_window_planes() if window_planes is None else int(window_planes)
+    total, rate = recording.num_planes, recording.plane_rate_hz
+    first, last = n // 2, total - n + n // 2
+    if last < first:
+        raise InputError(f"the recording has {total} planes, fewer than one {n}-plane window: no frame has a "
+                         "centred window")
+    return recording.start_s + first / rate, recording.start_s + (last + 1) / rate
 
 
 # --------------------------------------------------------------------------- streaming

@@ -141,3 +141,74 @@ def test_output_after_warm_up_does_not_depend_on_where_history_started(name, pan
     diff = float(np.abs(a - b).mean())
     print(f"{name}: mean |20-window - 10-window| = {diff:.4f}")
     assert diff < HISTORY_TOLERANCE
+
+
+def _events_sample(ev, key_s):
+    """An events-only sample at ``key_s`` holding every event before it (window: the last 1 ms)."""
+    from neuspike.sample import Sample
+
+    return Sample(height=ev.height, width=ev.width, key_time_s=key_s, window_start_s=key_s - 1e-3,
+                  window_end_s=key_s, events=ev.between(float(ev.t_s[0]), key_s))
+
+
+def test_streamed_state_equals_a_from_scratch_run_over_the_same_windows():
+    """Video streaming (reconstruct_next) carries the state: frame 2 steps only the two windows
+    completed since frame 1 and frame 3 its full windows plus a partial one; stepping the module by
+    hand over the same voxel grids, from a reset, gives the same images."""
+    from neuspike.methods.representations import event_windows, voxel_grid
+    from neuspike.streams import EventStream
+
+    rng = np.random.default_rng(5)
+    h, w, n = 24, 32, 12_000
+    ev = EventStream(np.sort(rng.uniform(0.0, 0.05, n)), rng.integers(0, w, n), rng.integers(0, h, n),
+                     rng.choice(np.array([-1, 1], np.int8), n), w, h)
+    method = create("e2vid", precision="float32", max_windows=6)
+    per = int(round(0.35 * h * w))
+    t = ev.t_s
+    k1 = float(t[8 * per] + t[8 * per + 1]) / 2
+    i1 = int(np.searchsorted(t, k1))
+    k2 = float(t[i1 + 2 * per])  # exactly two full windows after frame 1, none partial
+    k3 = float(t[i1 + 3 * per + per // 2])  # one full window and half of the next
+    images = [method.reconstruct(_events_sample(ev, k1))]
+    assert method.last_steps == 6
+    images.append(method.reconstruct_next(_events_sample(ev, k2), previous_s=k1))
+    assert method.last_steps == 2
+    images.append(method.reconstruct_next(_events_sample(ev, k3), previous_s=k2))
+    assert method.last_steps == 2  # one committed, one partial
+
+    def grid(a, b, t0, t1):
+        chunk = EventStream.trusted(t[a:b], ev.x[a:b], ev.y[a:b], ev.p[a:b], w, h)
+        g = voxel_grid(chunk, bins=5, t0_s=t0, t1_s=t1, height=h, width=w, normalize=True)
+        return torch.from_numpy(g)[None]
+
+    module, state = method.module, None
+    with torch.inference_mode():
+        first = event_windows(t[:i1], events_per_window=per, end_s=k1, max_windows=6)
+        for a, b, t0, t1 in first:
+            out, state = module(grid(a, b, t0, t1), state)
+        np.testing.assert_array_equal(images[0], out[0, 0].numpy())
+        out, state = module(grid(i1, i1 + per, k1, float(t[i1 + per])), state)
+        out, state = module(grid(i1 + per, i1 + 2 * per, float(t[i1 + per]), k2), state)
+        np.testing.assert_array_equal(images[1], out[0, 0].numpy())
+        j = i1 + 2 * per
+        out, state = module(grid(j, j + per, k2, float(t[j + per])), state)
+        out, _ = module(grid(j + per, j + per + per // 2, float(t[j + per]), k3), state)
+        np.testing.assert_array_equal(images[2], out[0, 0].numpy())
+
+
+def test_a_short_history_is_said_in_the_label():
+    """Too few events for max_windows windows before the first frame: the label says on how many
+    windows the state rests, fresh and carried, until the state has seen max_windows."""
+    from neuspike.streams import EventStream
+
+    rng = np.random.default_rng(6)
+    h, w, n = 24, 32, 3_000
+    ev = EventStream(np.sort(rng.uniform(0.0, 0.05, n)), rng.integers(0, w, n), rng.integers(0, h, n),
+                     rng.choice(np.array([-1, 1], np.int8), n), w, h)
+    method = create("e2vid", precision="float32", max_windows=8)
+    method.reconstruct(_events_sample(ev, 0.01))
+    windows = -(-int(np.searchsorted(ev.t_s, 0.01)) // int(round(0.35 * h * w)))  # the oldest one partial
+    assert windows < 8
+    assert f"short history: warmed up on {windows} of 8 windows" in method.last_normalisation
+    method.reconstruct_next(_events_sample(ev, 0.045), previous_s=0.01)
+    assert method.windows_seen >= 8 and "short history" not in method.last_normalisation

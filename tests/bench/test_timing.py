@@ -270,3 +270,39 @@ def test_flops_are_counted_against_a_closed_form_and_a_network_is_read_against_t
     assert math.isnan(classical["gflop_per_step"])  # no network, nothing counted
     md = tb.timing_markdown(frame)
     assert "FLOP-bound ms" in md and "| firenet-sim | 32x24 |" in md
+
+
+class FakeStreaming(FakeRecurrent):
+    """A recurrent method that steps four windows cold and one per new frame of a video."""
+
+    def reconstruct_next(self, sample, *, previous_s):
+        assert previous_s < sample.key_time_s
+        self.last_steps = 1
+        return sample
+
+
+def test_time_streaming_times_new_frames_after_an_untimed_cold_start():
+    frames = [Sample(height=2, width=2, key_time_s=k * 1e-3, window_start_s=k * 1e-3 - 1e-4,
+                     window_end_s=k * 1e-3 + 1e-4, spikes=SpikeStream(np.zeros((2, 2, 2), bool), plane_rate_hz=1e4,
+                                                                        start_s=k * 1e-3 - 1e-4)) for k in range(5)]
+    method = FakeStreaming()
+    assert timer.streams(method) and not timer.streams(FakeRecurrent())
+    # frame 1 (warm-up) 1 ms, then 3, 5, 4 ms; the cold start on frame 0 is not timed
+    ticks = [0, 1_000_000, 1_000_000, 4_000_000, 4_000_000, 9_000_000, 9_000_000, 13_000_000]
+    row = timer.time_streaming(method, frames, warmup=1, timer=fake_timer(ticks))
+    assert method.resets == 1
+    assert row == {"stream_ms": 4.0, "stream_min_ms": 3.0, "stream_max_ms": 5.0, "stream_steps": 1.0}
+    with pytest.raises(InputError, match="none to time"):
+        timer.time_streaming(method, frames[:2], warmup=1)
+
+
+def test_table_2_and_the_chart_label_the_cold_start_and_the_streaming_cost():
+    row = {c: math.nan for c in timer.TIMING_COLUMNS}
+    row.update(method="e2vid", family="event", resolution="32x24", width=32, height=24, status="ok", error="",
+               parameters=10, median_ms=400.0, ms_per_frame=25.0, min_frame_ms=24.0, max_frame_ms=26.0, steps=16,
+               cold_ms=400.0, stream_ms=50.0, stream_min_ms=45.0, stream_max_ms=60.0, stream_steps=2.0)
+    frame = pd.DataFrame([row], columns=list(timer.TIMING_COLUMNS))
+    md = tb.timing_markdown(frame)
+    assert "**cold start**" in md and "| e2vid | 32x24 | 400 (16 steps) | 50 [45-60] (2.0 steps) | 8.0x |" in md
+    joined = timer.join_accuracy(results_for({"e2vid": 12.0}), frame, "runs/x").set_index("method")
+    assert joined.loc["e2vid", "ms_per_frame"] == 400.0 and joined.loc["e2vid", "stream_ms"] == 50.0
