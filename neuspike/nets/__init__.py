@@ -50,7 +50,7 @@ __all__ = [
 
 #: The design the ablation chose (T_spike, T_event, F).
 DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "event_representation": "contrast",
-                                  "fusion": "gate"}
+                                  "fusion": "gate", "head": "support"}
 
 
 def register_methods(register: Callable[..., Any]) -> None:
