@@ -3,8 +3,12 @@
 Architecture (REFERENCE §1.1; :mod:`neuspike.nets.network`): two 3-level strided encoders (64, 128,
 256), the sum of the deepest features through two residual blocks, three transposed-conv decoders
 (128, 64, 32) with concatenated skips, the fusion module F at the two inner skip levels, the
-input-level skip ``x_t^0 + w x_m^0``, instance norm before ReLU, a prediction layer and tanh mapped
-to [0, 1]; any input size (padded to multiples of 8, cropped back).
+input-level skip ``x_t^0 + w x_m^0``, instance norm before ReLU, and a prediction head; any input
+size (padded to multiples of 8, cropped back). The paper's head (a convolution and tanh mapped to
+[0, 1], ``head="tanh"``) compressed contrast by about 8 % on bright scenes, since the instance-normalised
+features carry no absolute scale; the shipped weights use ``head="support"``: a per-pixel softmax
+over the spike representation's 32 radiance estimates (the temporal support the motion allows) plus
+an additive correction (:mod:`neuspike.nets.network`).
 
 Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
 :mod:`neuspike.nets.fusion`), chosen by a short measured ablation: each candidate trained from the
