@@ -172,13 +172,12 @@ def test_weights_trained_for_another_design_are_refused(weights_dir):
         create("neuspike-net", weights_dir=weights_dir)
 
 
-def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(weights_dir):
-    import json
-
-    card = weights_dir / "neuspike-net.json"
-    data = json.loads(card.read_text())
-    data["model"]["params"].pop("head", None)  # a card written before heads existed
-    card.write_text(json.dumps(data))
-    assert create("neuspike-net", weights_dir=weights_dir, head="tanh").module.head == "tanh"
+def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tmp_path):
+    params = {**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"}
+    module = NeuSpikeNetMethod.for_training("neuspike-net", **params).module
+    old_card = {k: v for k, v in params.items() if k != "head"}  # a card written before heads existed
+    save_safetensors(module, tmp_path / "neuspike-net.safetensors", card={"model": {"params": old_card}})
+    assert create("neuspike-net", weights_dir=tmp_path, head="tanh").module.head == "tanh"
     with pytest.raises(FormatError, match="trained for"):
-        create("neuspike-net", weights_dir=weights_dir, head="support")
+        create("neuspike-net", weights_dir=tmp_path, head="support")
+    assert DEFAULT_DESIGN["head"] == "support" == create("neuspike-net").module.head  # the shipped weights
