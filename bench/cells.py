@@ -378,7 +378,7 @@ def run_cell(task: CellTask) -> CellResult:
             if static is None:
                 static = static_region(cell.scene.spec, cell.condition, sensor=task.sensor, modalities=task.modalities,
                                        history_s=task.history_s, min_fraction=STATIC_MIN_FRACTION)
-        except Exception as exc:
+        except Exception:
             failures["static region"] = traceback.format_exc()
             static = None
         if task.keep_images:

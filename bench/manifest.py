@@ -590,7 +590,7 @@ def _instants_of(rec: Recording, reader: Any, span: tuple[float, float], window:
     inst = rec.instants
     gts = rec.ground_truth if isinstance(rec.ground_truth, list) else None
     one_gt = rec.ground_truth if not isinstance(rec.ground_truth, list) else None
-    rate, start = reader.plane_rate_hz, reader.start_s
+    rate = reader.plane_rate_hz
     spikes = reader.spikes_path is not None
 
     def at_plane(i: int, k: int, gt: str | None) -> Instant:
