@@ -319,6 +319,38 @@ def timed_reconstruct(slot: list[Any], sample: Any) -> tuple[np.ndarray, float]:
     return image, (time.perf_counter_ns() - t0) / 1e6
 
 
+def run_method(name: str, meta: dict[str, Any], resolved: dict[str, Any], sample: Any, row: dict[str, Any],
+               score: Any, *, images: dict[str, np.ndarray] | None, skipped: dict[str, str],
+               failures: dict[str, str]) -> dict[str, float]:
+    """One method on one sample, as a row: a skip or an error recorded at set-up, else the timed call
+    (:func:`timed_reconstruct`) and ``score(image)``; the status, error, time and normalisation go
+    into ``row``, the image into ``images`` (when given), an unavailable method into ``skipped`` and
+    a failure's traceback into ``failures``. Returns the metric values (empty unless it ran)."""
+    if "skip" in meta:
+        row.update(status=SKIPPED, error=meta["skip"])
+        return {}
+    if "error" in meta:
+        row.update(status=ERROR, error=meta["error"])
+        return {}
+    slot = resolved[name]
+    method = slot[1].method
+    try:
+        image, ms = timed_reconstruct(slot, sample)
+        row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
+        values = score(image)
+        row.update(status=OK, error="")
+        if images is not None:
+            images[name] = np.array(image, dtype=np.float32, copy=True)  # not a reused buffer
+        return values
+    except registry.MethodUnavailable as exc:
+        skipped[name] = one_line(exc)
+        row.update(status=SKIPPED, error=f"unavailable: {skipped[name]}")
+    except Exception as exc:
+        failures[name] = traceback.format_exc()
+        row.update(status=ERROR, error=one_line(exc))
+    return {}
+
+
 def run_cell(task: CellTask) -> CellResult:
     """Simulate the cell once and evaluate every method on it (see the module docstring).
 
@@ -394,29 +426,14 @@ def run_cell(task: CellTask) -> CellResult:
         if recording is not None and meta.get("inputs"):
             used = set(meta["inputs"].split("+"))
             row["effects"] = ";".join(f"{m}:{n}" for m, n in stage_names if m in used)
-        values: dict[str, float] = {}
-        if "skip" in meta:
-            row.update(status=SKIPPED, error=meta["skip"])
-        elif "error" in meta:
-            row.update(status=ERROR, error=meta["error"])
-        else:
-            slot = resolved[name]
-            method = slot[1].method
-            try:
-                image, ms = timed_reconstruct(slot, sample)
-                row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
-                values = evaluate(image, truth, data_range=DATA_RANGE)
-                if static is not None:
-                    values["static_texture"] = static_texture(image, truth, static, data_range=DATA_RANGE)
-                row.update(status=OK, error="")
-                if task.keep_images:
-                    images[name] = np.array(image, dtype=np.float32, copy=True)  # not a reused buffer
-            except registry.MethodUnavailable as exc:
-                skipped[name] = one_line(exc)
-                row.update(status=SKIPPED, error=f"unavailable: {skipped[name]}")
-            except Exception as exc:
-                failures[name] = traceback.format_exc()
-                row.update(status=ERROR, error=one_line(exc))
+        def score(image: np.ndarray) -> dict[str, float]:
+            values = evaluate(image, truth, data_range=DATA_RANGE)
+            if static is not None:
+                values["static_texture"] = static_texture(image, truth, static, data_range=DATA_RANGE)
+            return values
+
+        values = run_method(name, meta, resolved, sample, row, score, images=images if task.keep_images else None,
+                            skipped=skipped, failures=failures)
         for metric in METRICS:
             rows.append(base_row(**row, metric=metric, value=float(values.get(metric, np.nan))))
     status = ERROR if failures else OK

@@ -105,22 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _methods(args: argparse.Namespace) -> tuple[str, ...]:
-    from bench import grid as grids
-    from bench.cells import load_plugins, plugin_names
-    from neuspike import methods as registry
+    from bench.sweep import methods_from
 
-    load_plugins(plugin_names(tuple(args.plugin)))
-    for problem in registry.load_entry_points():
-        print(f"warning: a method plug-in failed to load: {problem}", file=sys.stderr)
-    if args.methods:
-        names = grids.parse_list(args.methods)
-        for name in names:
-            registry.entry(name)  # unknown names raise here, with the list of known ones
-        return names
-    names = tuple(registry.available())
-    if not names:
-        raise InputError("no methods are registered (is the package installed with its baselines?)")
-    return names
+    return methods_from(args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

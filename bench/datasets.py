@@ -2,7 +2,7 @@
 
 A dataset is a folder of recordings described by a manifest (:mod:`bench.manifest`). Each instant of
 each recording is one task of the harness's loop (:func:`bench.harness.run_tasks`): the same method
-creation (once per worker, :func:`bench.cells.instances`), timing (:func:`bench.cells.timed_reconstruct`),
+creation (once per worker, :func:`bench.cells.instances`), timing (:func:`bench.cells.run_method`),
 failure-as-a-row, resume and executors as the sweeps, and the same tidy ``results.csv``
 (:mod:`bench.results`; a row per recording, instant, method and metric).
 
@@ -39,10 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.cells import WorkerSetup, instances, method_slots, prepare_worker, timed_reconstruct
+from bench.cells import WorkerSetup, instances, method_slots, prepare_worker, run_method
 from bench.harness import Execution, SweepOutcome, arithmetic, check_config, prepare_execution, run_tasks
 from bench.manifest import Instant, Manifest, Resolved, resolve, write_manifest, MANIFEST_NAME
-from bench.results import ERROR, OK, SKIPPED, base_row
+from bench.results import ERROR, OK, base_row
 from neuspike.errors import InputError, one_line
 from neuspike.utils.jsonio import portable_path, stable_hash
 
@@ -211,7 +211,6 @@ def run_instant(task: InstantTask) -> Any:
     Returns a :class:`bench.cells.CellResult`; never raises for a method's or a file's failure.
     """
     from bench.cells import CellResult
-    from neuspike import methods as registry
     from neuspike.metrics import FULL_REFERENCE_METRICS, NO_REFERENCE_MEASURES, evaluate, no_reference
 
     t_start = time.perf_counter()
@@ -260,29 +259,13 @@ def run_instant(task: InstantTask) -> Any:
         meta = info[name]
         row = dict(common, method=name, inputs=meta.get("inputs", ""), recurrent=meta.get("recurrent", False),
                    parameters=meta.get("parameters", 0), method_params=meta.get("method_params", ""))
-        values: dict[str, float] = {}
-        if "skip" in meta:
-            row.update(status=SKIPPED, error=meta["skip"])
-        elif "error" in meta:
-            row.update(status=ERROR, error=meta["error"])
-        else:
-            slot = resolved[name]
-            method = slot[1].method
-            try:
-                image, ms = timed_reconstruct(slot, sample)
-                row.update(ms_per_frame=ms, normalisation=method.last_normalisation or "")
-                if truth is not None:
-                    values.update(evaluate(image, truth, data_range=DATA_RANGE))
-                values.update(no_reference(image))
-                row.update(status=OK, error="")
-                if task.keep_images:
-                    images[name] = np.array(image, dtype=np.float32, copy=True)
-            except registry.MethodUnavailable as exc:
-                skipped[name] = one_line(exc)
-                row.update(status=SKIPPED, error=f"unavailable: {skipped[name]}")
-            except Exception as exc:
-                failures[name] = traceback.format_exc()
-                row.update(status=ERROR, error=one_line(exc))
+        def score(image: np.ndarray) -> dict[str, float]:
+            values = evaluate(image, truth, data_range=DATA_RANGE) if truth is not None else {}
+            values.update(no_reference(image))
+            return values
+
+        values = run_method(name, meta, resolved, sample, row, score, images=images if task.keep_images else None,
+                            skipped=skipped, failures=failures)
         for metric in metrics:
             rows.append(base_row(**row, metric=metric, value=float(values.get(metric, np.nan))))
     status = ERROR if failures else OK

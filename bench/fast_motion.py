@@ -166,13 +166,14 @@ def temporal_support(out: Path, spec, *, weights: str | None = None, threads: in
     cells = [c for c in cells if c.scene.image == first_photo]
     rows = []
     methods = {name: create(name, weights_dir=weights, precision="float32") for name in learned}
+    for method in methods.values():
+        method.module.float().eval()
     for cell in cells:
         sample = simulate_sample(cell.scene.spec, cell.condition, sensor=spec.sensor, seed=cell.seed,
                                  modalities=("spikes", "events"))
         for name, method in methods.items():
             inputs = [x.clone().requires_grad_(True) for x in method.encode(sample)[0]]
-            module = method.module.float().eval()
-            y = module(*inputs)
+            y = method.module(*inputs)
             y.sum().backward()
             x = inputs[0]
             share = (x.grad * x).abs().sum(dim=(0, 2, 3)).detach().numpy().astype(np.float64)
@@ -192,11 +193,17 @@ def temporal_support(out: Path, spec, *, weights: str | None = None, threads: in
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     default_out = "runs/fast-motion" + ("-full" if args.full else "")
-    code = run_command(_spec, args, default_out)
+    built: dict[str, Any] = {}
+
+    def build(a: argparse.Namespace):
+        built["spec"] = _spec(a)
+        return built["spec"]
+
+    code = run_command(build, args, default_out)
     out = Path(args.out or default_out)
-    if code in (0, 1) and (out / "results.csv").exists():
+    if code in (0, 1) and (out / "results.csv").exists() and "spec" in built:
         try:
-            spec = _spec(args)
+            spec = built["spec"]
             temporal_support(out, spec, weights=spec.weights, threads=args.threads or 1)
             summarise(out)
         except InputError as exc:

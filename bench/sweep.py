@@ -104,7 +104,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _methods_from(args: argparse.Namespace) -> tuple[str, ...]:
+def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
+    """The requested method names (``--methods``, else every registered one), plug-ins loaded and each
+    name checked against the registry."""
     from bench.cells import load_plugins, plugin_names
     from neuspike import methods as registry
 
@@ -148,7 +150,7 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
         noises=noises, effects=effects,
     )
     return SweepSpec(
-        name=name, grid=grid, methods=_methods_from(args), sensor=SensorConfig(planes=args.planes),
+        name=name, grid=grid, methods=methods_from(args), sensor=SensorConfig(planes=args.planes),
         history_windows=args.history_windows, weights=str(weights) if weights is not None else None, axis=axis,
     )
 
