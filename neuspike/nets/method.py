@@ -24,7 +24,7 @@ from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
 from neuspike.nets.network import HEADS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
-                                           spike_gain, spike_representation)
+                                           spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 from neuspike.nets.sliding import SlidingRepresentation
@@ -115,7 +115,8 @@ class NeuSpikeNetMethod(LearnedMethod):
                            event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
-        """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W).
+        """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W), and with the
+        ``"support-count"`` head the spike quantum (1, 1, H, W) last.
 
         Raises
         ------
@@ -135,9 +136,12 @@ class NeuSpikeNetMethod(LearnedMethod):
         else:
             x_t = spike_representation(sample, p["spike_representation"])
             x_m = None if p["spike_only"] else event_representation(sample, p["event_representation"])
-        if p["spike_only"]:
-            return [(torch.from_numpy(x_t)[None],)]
-        return [(torch.from_numpy(x_t)[None], torch.from_numpy(x_m)[None])]
+        inputs = [torch.from_numpy(x_t)[None]]
+        if not p["spike_only"]:
+            inputs.append(torch.from_numpy(x_m)[None])
+        if p["head"] == "support-count":  # the spike quantum, as a map so that crops and turns keep it
+            inputs.append(torch.full((1, 1, *x_t.shape[-2:]), spike_quantum(sample), dtype=torch.float32))
+        return [tuple(inputs)]
 
     # -- streaming (neuspike.video): sliding representations ---------------------------------------
 

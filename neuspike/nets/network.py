@@ -23,6 +23,14 @@ Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back
     convolution's weights at zero the network is the mean of all channels (TFP and TFI over the
     window). The output is not bounded: the method clamps it to [0, 1], and training scores it
     unclamped.
+  - ``"support-count"``: as ``"support"``, but the correction is counted in spikes per 16-plane
+    group: ``sum_i softmax(a)_i x_t,i^0 + c * q`` with ``q = 1 / (16 * gain)``, the radiance of one
+    spike in a group, given as a last input (a (B, 1, H, W) map or (B, 1, 1, 1)). The biases the
+    correction removes are counts (the integrator's start loses half a spike per window on
+    average; a dark current adds spikes at a rate that does not depend on the light), while the
+    instance-normalised features carry no absolute scale. With ``"support"`` the network had to
+    infer the light level from the image to turn a count into radiance, and got a scene-dependent
+    offset; here the scale comes with the data.
 
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
@@ -48,7 +56,7 @@ ENCODER_CHANNELS = (64, 128, 256)
 DECODER_CHANNELS = (128, 64, 32)
 MULTIPLE = 8
 #: The prediction heads (module docstring).
-HEADS = ("tanh", "support")
+HEADS = ("tanh", "support", "support-count")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -112,17 +120,29 @@ class NeuSpikeNet(nn.Module):
         self.up3 = UpConvNormReLU(DECODER_CHANNELS[1] + ENCODER_CHANNELS[0], DECODER_CHANNELS[2])
         outputs = 1 if head == "tanh" else 1 + in_channels
         self.predict = nn.Conv2d(DECODER_CHANNELS[2] + in_channels, outputs, 3, padding=1)
-        if head == "support":  # start as the mean of every estimate, no correction
+        if head != "tanh":  # start as the mean of every estimate, no correction
             nn.init.zeros_(self.predict.weight)
             nn.init.zeros_(self.predict.bias)
 
-    def forward(self, spikes: torch.Tensor, events: torch.Tensor | None = None) -> torch.Tensor:
-        """spikes, events: (B, 32, H, W) -> image (B, 1, H, W) (in [0, 1] for the ``"tanh"`` head).
+    @property
+    def takes_quantum(self) -> bool:
+        """Whether the inputs end with the spike quantum ``q`` (the ``"support-count"`` head)."""
+        return self.head == "support-count"
 
-        ``events`` must be given to the full network and omitted for the spike-only one.
+    def forward(self, spikes: torch.Tensor, *rest: torch.Tensor | None) -> torch.Tensor:
+        """(spikes[, events][, quantum]) -> image (B, 1, H, W) (in [0, 1] for the ``"tanh"`` head).
+
+        spikes and events are (B, 32, H, W); ``events`` must be given to the full network and
+        omitted for the spike-only one; ``quantum`` (the radiance of one spike in a 16-plane group,
+        (B, 1, H, W) or (B, 1, 1, 1)) comes last, for the ``"support-count"`` head only.
         """
-        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
-            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        rest = list(rest)
+        quantum = rest.pop() if self.takes_quantum and rest and (self.spike_only or len(rest) == 2) else None
+        events = rest[0] if rest else None
+        if len(rest) > 1:
+            raise InputError(f"NeuSpikeNet: {len(rest) + 1 + (quantum is not None)} inputs given, expected at most "
+                             f"{1 + (not self.spike_only) + self.takes_quantum}")
+        self._check_inputs(spikes, quantum)
         if self.spike_only and events is not None:
             raise InputError("NeuSpikeNet: the spike-only network takes no events")
         if not self.spike_only:
@@ -133,32 +153,47 @@ class NeuSpikeNet(nn.Module):
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(spikes))
         if self.spike_only:
-            return self._decode(t[3], t[2], t[1], t[0], t[0])[..., :h, :w]
+            return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
         m = self.motion(pad_to_multiple(events))
-        out = self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                           t[0] + self.event_skip_weight * m[0], t[0])
-        return out[..., :h, :w]
+        return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
+                            t[0] + self.event_skip_weight * m[0], t[0], quantum, (h, w))
 
-    def forward_texture_only(self, spikes: torch.Tensor) -> torch.Tensor:
+    def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None) -> torch.Tensor:
         """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
 
-        spikes: (B, 32, H, W) -> (B, 1, H, W); equals the spike-only module holding the
+        spikes: (B, 32, H, W) [, quantum] -> (B, 1, H, W); equals the spike-only module holding the
         same texture-path, residual and decoder weights.
         """
-        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
-            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        self._check_inputs(spikes, quantum)
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(spikes))
-        return self._decode(t[3], t[2], t[1], t[0], t[0])[..., :h, :w]
+        return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
+
+    def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None) -> None:
+        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
+            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        if self.takes_quantum:
+            if quantum is None:
+                raise InputError("NeuSpikeNet: the support-count head needs the spike quantum as its last input")
+            if quantum.ndim != 4 or quantum.shape[:2] != (spikes.shape[0], 1) or \
+                    quantum.shape[-2:] not in ((1, 1), tuple(spikes.shape[-2:])):
+                raise InputError(f"NeuSpikeNet: quantum must be (B, 1, H, W) or (B, 1, 1, 1) for spikes "
+                                 f"{tuple(spikes.shape)}, got {tuple(quantum.shape)}")
+        elif quantum is not None:
+            raise InputError(f"NeuSpikeNet: the {self.head!r} head takes no quantum")
 
     def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor,
-                spikes: torch.Tensor) -> torch.Tensor:
+                spikes: torch.Tensor, quantum: torch.Tensor | None, size: tuple[int, int]) -> torch.Tensor:
+        h, w = size
         d = self.up1(self.residual(r))
         d = self.up2(torch.cat([d, s2], dim=1))
         d = self.up3(torch.cat([d, s1], dim=1))
-        y = self.predict(torch.cat([d, s0.to(d.dtype)], dim=1))
+        y = self.predict(torch.cat([d, s0.to(d.dtype)], dim=1))[..., :h, :w]
         if self.head == "tanh":
             return 0.5 * (torch.tanh(y) + 1.0)
         weights = torch.softmax(y[:, 1:].float(), dim=1)
-        support = (weights * spikes.float()).sum(dim=1, keepdim=True)
-        return support + y[:, :1].float()
+        support = (weights * spikes[..., :h, :w].float()).sum(dim=1, keepdim=True)
+        correction = y[:, :1].float()
+        if quantum is not None:
+            correction = correction * quantum.float()
+        return support + correction

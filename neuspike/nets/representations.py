@@ -44,7 +44,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
     _kernels = None
 
 __all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "SPIKE_REPRESENTATIONS", "event_representation",
-           "spike_gain", "spike_representation"]
+           "spike_gain", "spike_quantum", "spike_representation"]
 
 #: Channels of either representation (the supplement's 32).
 CHANNELS = 32
@@ -82,6 +82,16 @@ def spike_gain(sample: Sample) -> tuple[float, str]:
     rate = spikes.planes.mean(axis=0, dtype=np.float32)
     top = float(np.percentile(rate, 99.5))
     return (top if top > 0 else 1.0 / spikes.num_planes), "estimated"
+
+
+def spike_quantum(sample: Sample) -> float:
+    """The radiance of one spike in one of the 16 plane groups: ``16 / (T * gain)`` (T planes).
+
+    The rates of the ``counts_interval`` representation are multiples of it; the ``"support-count"``
+    head of :class:`~neuspike.nets.network.NeuSpikeNet` counts its correction in this unit.
+    """
+    planes = _planes(sample)
+    return float(CHANNELS // 2) / (planes.shape[0] * spike_gain(sample)[0])
 
 
 def _planes(sample: Sample) -> np.ndarray:

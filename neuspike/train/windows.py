@@ -317,7 +317,7 @@ class WindowTask:
 
     def forward(self, inputs: Sequence[torch.Tensor], variant: str) -> torch.Tensor:
         if variant == "spike":
-            return self.module.forward_texture_only(inputs[0])
+            return self.module.forward_texture_only(inputs[0], *inputs[2:])
         return self.module(*inputs)
 
     def loss(self, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:

@@ -7,7 +7,7 @@ import torch
 from neuspike.errors import FormatError, InputError
 from neuspike.methods import create, entry
 from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod, event_representation, spike_representation
-from neuspike.nets.representations import interval_rate
+from neuspike.nets.representations import interval_rate, spike_quantum
 from neuspike.sample import Sample
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.methods.weights import save_safetensors
@@ -181,3 +181,19 @@ def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tm
     with pytest.raises(FormatError, match="trained for"):
         create("neuspike-net", weights_dir=tmp_path, head="support")
     assert DEFAULT_DESIGN["head"] == "support" == create("neuspike-net").module.head  # the shipped weights
+
+
+def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
+    """support-count's last input: 16 / (T * gain), the smallest step of the 16 group rates."""
+    sample = make_sample(gain=0.25, period=7)
+    rates = spike_representation(sample, "counts_interval")[:16]
+    q = spike_quantum(sample)
+    assert q == pytest.approx(16 / (T * 0.25))
+    counts = rates / q  # each group's spike count
+    assert np.allclose(counts, np.round(counts), atol=1e-5) and counts.max() > 1
+    design = {**DEFAULT_DESIGN, "spike_only": False}
+    method = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support-count"})
+    inputs = method.encode(sample)[0]
+    assert len(inputs) == 3 and inputs[-1].shape == (1, 1, H, W)
+    assert torch.all(inputs[-1] == torch.tensor(q, dtype=torch.float32))
+    assert len(NeuSpikeNetMethod.for_training("neuspike-net", **design).encode(sample)[0]) == 2  # support: none

@@ -124,6 +124,42 @@ def test_support_head_is_a_convex_choice_among_the_estimates_plus_a_correction(o
         assert torch.allclose(net(x), y + 0.25, atol=1e-5)
 
 
+def test_support_count_head_counts_its_correction_in_spikes(one_torch_thread):
+    """The correction is multiplied by the quantum (the radiance of one spike per group), per sample."""
+    torch.manual_seed(5)
+    for spike_only in (False, True):
+        net = NeuSpikeNet(head="support-count", spike_only=spike_only).eval()
+        x = torch.rand(2, 32, 19, 26) * 2.0
+        q = torch.tensor([0.5, 2.0]).view(2, 1, 1, 1)
+        args = (x,) if spike_only else (x, torch.randn_like(x))
+        with torch.no_grad():
+            base = net(*args, q)
+            assert torch.allclose(base, x.mean(dim=1, keepdim=True), atol=1e-6)  # zero head: the mean
+            net.predict.bias[0] = 0.5  # half a spike per group
+            y = net(*args, q)
+            assert torch.allclose(y - base, 0.5 * q.expand_as(base), atol=1e-5)
+            # the quantum as a map (what the method passes, so crops keep it) gives the same image
+            assert torch.equal(net(*args, q.expand(2, 1, 19, 26)), y)
+            if not spike_only:  # the motion path silenced equals the spike-only network with these weights
+                alone = NeuSpikeNet(head="support-count", spike_only=True).eval()
+                alone.load_state_dict({k: v for k, v in net.state_dict().items()
+                                       if not k.startswith(("motion.", "fuse1.", "fuse2."))})
+                assert torch.allclose(net.forward_texture_only(x, q), alone(x, q), atol=1e-6)
+
+
+def test_support_count_head_inputs_are_checked():
+    x = torch.rand(1, 32, 16, 16)
+    count, support = NeuSpikeNet(head="support-count", spike_only=True), NeuSpikeNet(head="support", spike_only=True)
+    with pytest.raises(InputError, match="quantum"):
+        count(x)
+    with pytest.raises(InputError, match="quantum"):
+        count(x, torch.ones(1, 1, 8, 8))
+    with pytest.raises(InputError, match="no quantum"):
+        support.forward_texture_only(x, torch.ones(1, 1, 1, 1))
+    with pytest.raises(InputError, match="quantum"):
+        NeuSpikeNet(head="support-count")(x, torch.randn_like(x))
+
+
 def test_parameter_count_of_the_support_head():
     tanh, support = NeuSpikeNet(), NeuSpikeNet(head="support")
     extra = sum(p.numel() for p in support.parameters()) - sum(p.numel() for p in tanh.parameters())
