@@ -235,9 +235,9 @@ class Trainer:
         if simulate_only:
             return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}
         resumed = self.resume()
+        self.task.load_validation()  # before choose_precision: timing a step needs the loaded data
         self.choose_precision()
         ck.trim_log(self.out, self.step)
-        self.task.load_validation()
         if not resumed and spec.init_from is not None:
             # the starting weights set the bar: a later stage exports only what improves on them
             self.validate_and_export(force_bar=True)
