@@ -4,7 +4,9 @@ The method says what it trains on: a recurrent method (``e2vid``, ``firenet-sim`
 event windows, a feed-forward one (``neuspike-net``) on single windows. A few flags are parsed into
 one frozen :class:`~neuspike.train.spec.TrainSpec` (saved as ``spec.json`` in the run folder) and
 :func:`~neuspike.train.loop.train` runs it; the same command again resumes from the run folder's
-checkpoint. Nothing heavy (torch) is imported before the arguments are parsed.
+checkpoint (on the same or another ``--device``). Nothing heavy (torch) is imported before the
+arguments are parsed; the device is resolved when the trainer starts, before anything is simulated
+or written.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ examples (the commands behind the shipped weights are in reports/<network>/READM
       --val-windows 32 --val-every 200 --lr 1e-3 --warmup 100 --threads 1 --export
   python -m neuspike.train neuspike-net --spec reports/neuspike-net/spec_stage2.json --export
   python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
+  python -m neuspike.train e2vid --device cuda            # on a GPU (--device cpu resumes it on a CPU)
   python -m neuspike.train e2vid --quick --no-export      # a one-minute smoke run"""
 
 
@@ -57,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("method", help="registered learned method (neuspike-net, e2vid, firenet-sim, ...)")
     p.add_argument("--spec", help="run this spec.json (of this trainer or an earlier one); other flags are then "
-                                  "ignored except --out")
+                                  "ignored except --out and --device")
     p.add_argument("--out", "--run-dir", dest="out", help="run folder (default runs/METHOD)")
     p.add_argument("--shard", "--shards", dest="shard",
                    help="folder of the simulated data (default runs/shard for windows, runs/shards for sequences)")
@@ -73,8 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--val-every", type=int, help="validate (and export a new best) every N steps")
     g.add_argument("--seed", type=int, default=0, help="seed of data, order and initial weights (default 0)")
     g.add_argument("--threads", type=int, help="torch threads (windows default 1; 1 when another job shares the CPU)")
+    g.add_argument("--device", help="torch device to train on: cpu (default), or cuda, cuda:1, ... where torch sees "
+                                    "a GPU (a device this machine lacks is refused before anything is simulated or "
+                                    "written). The data and their random draws stay on the CPU, so a seed gives the "
+                                    "same data on any device; a run may resume on another device")
     g.add_argument("--precision", choices=("auto", "float32", "bfloat16"),
-                   help="autocast precision (default auto: float32 unless the CPU computes bfloat16 natively and "
+                   help="autocast precision (default auto: float32 unless the device computes bfloat16 natively and "
                         "a timed training step is at least 10%% faster in it; the choice is kept in the run "
                         "folder's precision.json; firenet-sim float32)")
     g.add_argument("--param", action="append", default=[], metavar="KEY=JSON",
@@ -128,6 +135,8 @@ def _list(text: str) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace):
     """The :class:`~neuspike.train.spec.TrainSpec` of parsed arguments (imports the registry)."""
+    from dataclasses import replace
+
     from neuspike.errors import InputError
     from neuspike.methods import entry
     from neuspike.train.spec import SequenceData, TrainSpec, WindowData, load_spec, with_out_dir
@@ -136,6 +145,8 @@ def spec_from_args(args: argparse.Namespace):
         spec = load_spec(args.spec, out_dir=args.out or f"runs/{args.method}")
         if spec.method != args.method:
             raise InputError(f"--spec {args.spec} trains {spec.method!r}, not {args.method!r}")
+        if args.device is not None:
+            spec = replace(spec, device=args.device)
         return with_out_dir(spec, args.out) if args.out else spec
     e = entry(args.method)
     kind = "sequences" if getattr(e.factory, "recurrent", False) else "windows"
@@ -150,7 +161,8 @@ def spec_from_args(args: argparse.Namespace):
     if args.quick:
         kw.update(QUICK, **QUICK_KIND[kind])
     data_fields = WindowData.__dataclass_fields__ if kind == "windows" else SequenceData.__dataclass_fields__
-    top = {"steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "threads", "precision", "init_from"}
+    top = {"steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "threads", "device", "precision",
+           "init_from"}
     for name in top:
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)

@@ -6,15 +6,18 @@ or the new one, and the temporaries a kill leaves behind are removed when the ru
 
 * ``spec.json``: :meth:`TrainSpec.as_dict`; a folder holding another run's spec is refused. Spec
   files of the earlier trainers read through :func:`neuspike.train.spec.spec_from_dict`.
-* ``checkpoint.pt``: ``{"format": 2, "step", "module", "optimizer", "best", "wall_s", "torch_rng"}``.
-  The earlier trainers' checkpoints (``model``/``optim`` with a best PSNR per variant, or
-  ``module``/``optimizer`` with one best record) read through :func:`upgrade_checkpoint`.
+* ``checkpoint.pt``: ``{"format": 2, "step", "module", "optimizer", "best", "wall_s", "torch_rng"}``,
+  every tensor on the CPU whatever device trained, read with ``map_location="cpu"``, so a run
+  resumes on any device. The earlier trainers' checkpoints (``model``/``optim`` with a best PSNR
+  per variant, or ``module``/``optimizer`` with one best record) read through
+  :func:`upgrade_checkpoint`.
 * ``train_log.csv``: one row per step (``kind`` ``train``) and per validation (``kind`` ``val``),
   columns :data:`LOG_COLUMNS`. On resume the rows after the checkpoint's step are dropped
   (:func:`trim_log`), so the log never repeats a step; an earlier trainer's log is rewritten in these
   columns.
 * weights: ``<name>.safetensors`` and its card ``<name>.json`` (:func:`export_weights`): float32 for
-  networks under a million parameters, bfloat16 above (the card records which).
+  networks under a million parameters, bfloat16 above (the card records which), written from CPU
+  tensors; the card's ``training.device`` names the device the exported step ran on.
 """
 
 from __future__ import annotations
@@ -123,14 +126,27 @@ def upgrade_checkpoint(state: Mapping[str, Any], *, score_key: str, variants: It
     raise FormatError(f"not a training checkpoint (keys {sorted(state)})")
 
 
+def _on_cpu(value: Any) -> Any:
+    """``value`` with every tensor inside (dicts, lists, tuples) moved to the CPU (CPU tensors as they are)."""
+    import torch
+
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu()
+    if isinstance(value, dict):
+        return {k: _on_cpu(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_on_cpu(v) for v in value)
+    return value
+
+
 def save_checkpoint(out_dir: str | os.PathLike, *, step: int, module, optimizer, best: Mapping[str, Any],
                     wall_s: float) -> Path:
-    """Write ``checkpoint.pt`` atomically (with torch's global RNG state)."""
+    """Write ``checkpoint.pt`` atomically, every tensor on the CPU (with torch's global CPU RNG state)."""
     import torch
 
     buf = io.BytesIO()
-    torch.save({"format": CHECKPOINT_FORMAT, "step": int(step), "module": module.state_dict(),
-                "optimizer": optimizer.state_dict(), "best": dict(best), "wall_s": float(wall_s),
+    torch.save({"format": CHECKPOINT_FORMAT, "step": int(step), "module": _on_cpu(module.state_dict()),
+                "optimizer": _on_cpu(optimizer.state_dict()), "best": dict(best), "wall_s": float(wall_s),
                 "torch_rng": torch.get_rng_state()}, buf)
     return atomic.write_bytes(Path(out_dir) / CHECKPOINT, buf.getvalue())
 
@@ -210,12 +226,21 @@ def _commit() -> str | None:
 
 
 def make_card(spec: TrainSpec, *, name: str, model_class: str, params: Mapping[str, Any], step: int,
-              precision: str, wall_s: float, scores: Mapping[str, float], data: Mapping[str, Any]) -> dict[str, Any]:
-    """The JSON card of exported weights: what was trained, how, on what, and how well it validated."""
+              precision: str, device: Any, wall_s: float, scores: Mapping[str, float],
+              data: Mapping[str, Any]) -> dict[str, Any]:
+    """The JSON card of exported weights: what was trained, how, on what, and how well it validated.
+
+    ``device`` (a torch device or its name): where the exported step ran; a CUDA device's card also
+    names the GPU (``device_name``).
+    """
     import torch
 
+    device = torch.device(device)
+    where = {"device": str(device)}
+    if device.type == "cuda":
+        where["device_name"] = torch.cuda.get_device_name(device)
     return {"method": name, "model": {"class": model_class, "params": dict(params)},
-            "training": {"spec": spec.as_dict(), "step": int(step), "precision": precision,
+            "training": {"spec": spec.as_dict(), "step": int(step), "precision": precision, **where,
                          "wall_s": round(float(wall_s), 1), "threads": torch.get_num_threads(), "commit": _commit(),
                          "command": f"python -m neuspike.train {spec.method} --spec SPEC (the spec above)"},
             "data": dict(data), "validation": {k: v for k, v in scores.items() if k != "step"}, "torch": torch.__version__}
@@ -224,7 +249,7 @@ def make_card(spec: TrainSpec, *, name: str, model_class: str, params: Mapping[s
 def export_weights(state: Mapping[str, Any], folders: Iterable[str | os.PathLike], name: str,
                    card: Mapping[str, Any]) -> list[Path]:
     """Write ``<name>.safetensors`` and its card into every folder; float32 under a million parameters,
-    bfloat16 above."""
+    bfloat16 above (tensors on any device: the file is written from CPU copies)."""
     import torch
 
     from neuspike.methods.weights import save_safetensors

@@ -9,10 +9,20 @@ trainer builds it with :meth:`~neuspike.methods.learned.LearnedMethod.for_traini
 each step's batch from the seed and the step alone, so a resumed run computes what a straight one
 does.
 
-Precision: ``"auto"`` trains in float32 on a CPU without native bfloat16; where the CPU has it, one
-training step (forward and backward of step 0's batch) is timed in both and bfloat16 is used only when
-it takes at most 0.9 times as long (on some CPUs with the instructions it is slower). The choice and
-its measurement are written to ``precision.json`` in the run folder, and a resumed run keeps it.
+Device: ``spec.device`` is resolved by :func:`~neuspike.methods.learned.resolve_device` before
+anything else (a device this machine lacks is an :class:`~neuspike.errors.InputError` naming it,
+before any data are simulated or any file written). The module, each batch (moved there once it is
+drawn), the loss and the validation run on it; the data, their shard and every random generator of
+data and order stay on the CPU, so the same seed gives the same batches on any device. Checkpoints
+hold CPU tensors and load onto the run's device, so a run checkpointed on a GPU resumes on a CPU and
+the other way round; exported weights are written from CPU tensors and their card names the device.
+Step times synchronise a CUDA device before the clock is read.
+
+Precision: ``"auto"`` trains in float32 on a device without native bfloat16; where the device has it
+(:func:`~neuspike.methods.learned.resolve_precision`), one training step (forward and backward of step
+0's batch) is timed in both and bfloat16 is used only when it takes at most 0.9 times as long (on some
+CPUs with the instructions it is slower). The choice and its measurement are written to
+``precision.json`` in the run folder, and a resumed run keeps it.
 
 Each step: the rate of :func:`~neuspike.train.spec.learning_rate`, the task's loss (under bfloat16
 autocast where the precision says so), AdamW or Adam, gradients clipped to norm 1. Every
@@ -39,14 +49,15 @@ from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 from neuspike.utils.checks import check_positive_int
 from neuspike.utils.parallel import set_threads
 
-__all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
+__all__ = ["STALE_SHARD_S", "Trainer", "synchronize", "train", "training_method"]
 
 #: A shard's temporaries older than this are a killed run's (one item is written in well under a second).
 STALE_SHARD_S = 600.0
 
 
-def training_method(spec: TrainSpec):
-    """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights)."""
+def training_method(spec: TrainSpec, device: str | torch.device = "cpu"):
+    """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights),
+    its module on ``device`` (built on the CPU first, so the initial weights do not depend on the device)."""
     from neuspike.methods.learned import LearnedMethod
     from neuspike.methods import entry
 
@@ -57,21 +68,31 @@ def training_method(spec: TrainSpec):
     if spec.kind != want:
         raise InputError(f"method {spec.method!r} trains on {want}, but the spec's data are {spec.kind}")
     torch.manual_seed(spec.seed)
-    return e.factory.for_training(e.name, **{**dict(e.params), **spec.params})
+    return e.factory.for_training(e.name, device=device, **{**dict(e.params), **spec.params})
 
 
 #: bfloat16 is chosen only when its measured step takes at most this fraction of float32's.
 BF16_FASTER = 0.9
 
 
+def synchronize(device: torch.device) -> None:
+    """Wait for the work queued on ``device`` (a CUDA device; others run synchronously): call before
+    reading a clock that times it."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 class Trainer:
     """One training run of ``spec`` (module docstring)."""
 
     def __init__(self, spec: TrainSpec, *, quiet: bool = False) -> None:
+        from neuspike.methods.learned import resolve_device, resolve_precision
+
+        self.device = resolve_device(spec.device)  # first: a missing device is refused before any work
         self.spec = spec
         self.quiet = quiet
         self.out = Path(spec.out_dir)
-        self.method = training_method(spec)
+        self.method = training_method(spec, self.device)
         self.module = self.method.module.float().train()
         if isinstance(spec.data, WindowData):
             from neuspike.train.windows import WindowTask
@@ -89,9 +110,7 @@ class Trainer:
             self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
         else:
             self.optim = torch.optim.Adam(self.module.parameters(), lr=spec.lr)
-        from neuspike.methods.learned import resolve_precision
-
-        self.precision = resolve_precision(spec.precision, torch.device("cpu"))
+        self.precision = resolve_precision(spec.precision, self.device)
         self.task.precision = self.precision
         self.step = 0
         self.wall_s = 0.0
@@ -103,7 +122,7 @@ class Trainer:
     @contextlib.contextmanager
     def autocast(self) -> Iterator[None]:
         if self.precision == "bfloat16":
-            with torch.autocast("cpu", dtype=torch.bfloat16):
+            with torch.autocast(self.device.type, dtype=torch.bfloat16):
                 yield
         else:
             yield
@@ -126,6 +145,7 @@ class Trainer:
         torch.nn.utils.clip_grad_norm_(self.module.parameters(), 1.0)
         self.optim.step()
         self.step += 1
+        synchronize(self.device)
         return {"step": self.step, "kind": "train", "loss": float(loss.detach()), "lr": lr,
                 "seconds": round(time.perf_counter() - t0, 4), **info}
 
@@ -158,8 +178,8 @@ class Trainer:
         name, state, params = self.task.exported(variant, self.spec.method)
         params = {k: v for k, v in params.items() if k not in ("weights_file", "precision")}  # not the design
         card = ck.make_card(self.spec, name=name, model_class=type(self.method).__name__, params=params,
-                            step=self.step, precision=self.precision, wall_s=self.wall_s, scores=scores,
-                            data=self.task.describe_data())
+                            step=self.step, precision=self.precision, device=self.device, wall_s=self.wall_s,
+                            scores=scores, data=self.task.describe_data())
         ck.export_weights(state, folders, name, card)
 
     def save(self) -> None:
@@ -170,6 +190,7 @@ class Trainer:
         state = ck.load_checkpoint(self.out, score_key=self.task.score_key, variants=self.task.variants())
         if state is None:
             return False
+        # CPU tensors: the module copies them onto its device, the optimiser moves its state to its parameters'
         self.module.load_state_dict(state["module"])
         self.optim.load_state_dict(state["optimizer"])
         self.step = int(state["step"])
@@ -191,7 +212,7 @@ class Trainer:
         else:
             times = {p: self._step_ms(p) for p in ("float32", "bfloat16")}
             choice = "bfloat16" if times["bfloat16"] <= BF16_FASTER * times["float32"] else "float32"
-            record = {"choice": choice, "requested": "auto", "measured": True,
+            record = {"choice": choice, "requested": "auto", "measured": True, "device": str(self.device),
                       "ms_per_step": {k: round(v, 1) for k, v in times.items()}, "rule": f"bfloat16 if <= {BF16_FASTER} x float32"}
         self.out.mkdir(parents=True, exist_ok=True)
         atomic.write_json(path, record)
@@ -208,6 +229,7 @@ class Trainer:
             loss, _ = self.task.step_loss(0, self.autocast)
             loss.backward()
             self.optim.zero_grad(set_to_none=True)
+            synchronize(self.device)
             if i:  # the first pass warms up
                 times.append(1e3 * (time.perf_counter() - t0))
         return sorted(times)[len(times) // 2]
@@ -235,9 +257,9 @@ class Trainer:
         if simulate_only:
             return {"step": 0, "simulated": {"train": len(self.task.train_paths), "val": len(self.task.val_paths)}}
         resumed = self.resume()
+        self.task.load_validation()  # before choose_precision: timing a step needs the loaded data
         self.choose_precision()
         ck.trim_log(self.out, self.step)
-        self.task.load_validation()
         if not resumed and spec.init_from is not None:
             # the starting weights set the bar: a later stage exports only what improves on them
             self.validate_and_export(force_bar=True)

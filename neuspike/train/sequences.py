@@ -216,7 +216,7 @@ def make_batch(shard: dict[str, np.ndarray], rng: np.random.Generator, *, batch:
     """Random items, a random run of ``length`` consecutive windows (default all), random crops of
     ``crop`` pixels, random horizontal/vertical flips (flow signs follow).
 
-    Returns float32 tensors ``voxels`` (K, B, 5, c, c), ``targets`` (K, B, 1, c, c), ``flow`` (K, B, 2, c, c).
+    Returns float32 CPU tensors ``voxels`` (K, B, 5, c, c), ``targets`` (K, B, 1, c, c), ``flow`` (K, B, 2, c, c).
     """
     n, k, _, h, w = shard["voxels"].shape
     length = k if length is None else length
@@ -247,10 +247,13 @@ def make_batch(shard: dict[str, np.ndarray], rng: np.random.Generator, *, batch:
 
 
 def warp(image: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Sample ``image`` (B, C, H, W) at ``(x + dx, y + dy)`` (bilinear); also the in-frame mask (B, 1, H, W)."""
+    """Sample ``image`` (B, C, H, W) at ``(x + dx, y + dy)`` (bilinear); also the in-frame mask (B, 1, H, W).
+
+    ``flow`` (B, 2, H, W) in pixels, on ``image``'s device.
+    """
     b, _, h, w = image.shape
-    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32),
-                            indexing="ij")
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32, device=image.device),
+                            torch.arange(w, dtype=torch.float32, device=image.device), indexing="ij")
     sx = xs[None] + flow[:, 0]
     sy = ys[None] + flow[:, 1]
     grid = torch.stack([2 * sx / max(w - 1, 1) - 1, 2 * sy / max(h - 1, 1) - 1], dim=-1)
@@ -286,10 +289,14 @@ def sequence_loss(outputs: Sequence[torch.Tensor], batch: dict[str, torch.Tensor
 
 
 def run_sequence(module: torch.nn.Module, voxels: torch.Tensor, *, precision: str) -> list[torch.Tensor]:
-    """Feed ``voxels`` (K, B, 5, H, W) step by step from a zero state; the K outputs (B, 1, H, W)."""
+    """Feed ``voxels`` (K, B, 5, H, W) step by step from a zero state; the K outputs (B, 1, H, W).
+
+    ``voxels`` are on the module's device; bfloat16 autocasts on that device.
+    """
     state = None
     outputs = []
-    ctx = torch.autocast("cpu", dtype=torch.bfloat16) if precision == "bfloat16" else contextlib.nullcontext()
+    ctx = (torch.autocast(voxels.device.type, dtype=torch.bfloat16) if precision == "bfloat16"
+           else contextlib.nullcontext())
     with ctx:
         for k in range(voxels.shape[0]):
             out, state = module(voxels[k], state)
@@ -302,18 +309,20 @@ def validate_sequences(module: torch.nn.Module, shard: dict[str, np.ndarray], da
     """Mean L1 and SSIM (:func:`neuspike.metrics.ssim`, data range 1) of ``module`` over the items of
     ``shard`` (:func:`load_shard`), on the steps after ``data.warmup_windows`` and on the last step.
 
-    Leaves ``module`` in eval mode.
+    The items go to the module's device one at a time; the outputs are scored on the CPU. Leaves
+    ``module`` in eval mode.
     """
     from neuspike.metrics import ssim as ssim_metric
 
+    device = next(module.parameters()).device
     module.eval()
     l1s, ssims, last = [], [], []
     with torch.no_grad():
         for i in range(shard["voxels"].shape[0]):
-            vox = torch.from_numpy(shard["voxels"][i].astype(np.float32))[:, None]
+            vox = torch.from_numpy(shard["voxels"][i].astype(np.float32))[:, None].to(device)
             outs = run_sequence(module, vox, precision=precision)
             for k in range(data.warmup_windows, len(outs)):
-                o = outs[k][0, 0].float().clamp(0, 1).numpy()
+                o = outs[k][0, 0].float().clamp(0, 1).cpu().numpy()
                 y = shard["targets"][i, k, 0].astype(np.float32)
                 l1s.append(float(np.abs(o - y).mean()))
                 s = float(ssim_metric(o, y, data_range=1.0))
@@ -326,7 +335,8 @@ def validate_sequences(module: torch.nn.Module, shard: dict[str, np.ndarray], da
 class SequenceTask:
     """Batches, loss and validation of a recurrent network on sequences (module docstring).
 
-    Step ``k``'s batch comes from ``derive_rng(seed, "batch", k)``; validation scores the mean SSIM
+    Step ``k``'s batch comes from ``derive_rng(seed, "batch", k)`` (drawn on the CPU, then moved to
+    the method's device, ``method.device``, where the loss runs); validation scores the mean SSIM
     (and L1) over the held-out sequences' steps after the warm-up, and the last step's SSIM; the
     best mean SSIM exports.
     """
@@ -338,6 +348,7 @@ class SequenceTask:
         self.data: SequenceData = spec.data
         self.method = method
         self.module = method.module
+        self.device = method.device
         self.precision = "float32"
         if method.params.get("max_windows", 0) <= self.data.windows:
             raise InputError(f"method {spec.method!r}: max_windows must exceed the sequence's "
@@ -370,6 +381,7 @@ class SequenceTask:
         spec = self.spec
         batch = make_batch(self.train_shard, derive_rng(spec.seed, "batch", step), batch=spec.batch, crop=spec.crop,
                            length=self.data.length)
+        batch = {k: v.to(self.device) for k, v in batch.items()}
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
         loss, parts = sequence_loss(outputs, batch, self.data)
         return loss, {**parts, "variant": "main"}

@@ -7,10 +7,10 @@ The data section says what a training item is:
 * :class:`SequenceData` (``kind = "sequences"``): sequences of consecutive event windows of one
   moving scene, with their targets and exact flow, for recurrent networks (E2VID, FireNet).
 
-Everything else (optimiser, schedule, validation and checkpoint cadence, precision, starting
-weights) is shared. Spec files written by the earlier trainers (the flat single-window spec and
-the sequence spec with ``lr_warmup_steps``) read back through :func:`spec_from_dict` as the same
-run. This module imports nothing heavy (the command's ``--help`` stays fast).
+Everything else (optimiser, schedule, validation and checkpoint cadence, device, precision,
+starting weights) is shared. Spec files written by the earlier trainers (the flat single-window
+spec and the sequence spec with ``lr_warmup_steps``) read back through :func:`spec_from_dict` as
+the same run. This module imports nothing heavy (the command's ``--help`` stays fast).
 """
 
 from __future__ import annotations
@@ -287,9 +287,17 @@ class TrainSpec:
         Steps between validations (a better score exports the weights) and between checkpoints.
     threads : int or None
         torch threads (None: as the process has them).
+    device : str
+        The torch device the module, the batches and the loss run on (``"cpu"``, ``"cuda"``,
+        ``"cuda:1"``, ...; resolved by :func:`neuspike.methods.learned.resolve_device` when the
+        trainer starts, so a device this machine lacks is refused before anything is simulated or
+        written). The data and every random draw of data and order stay on the CPU: the same seed
+        gives the same batches on any device. Spec files without the field mean ``"cpu"``. Not part
+        of the run's identity: a run may resume on another device (its numbers then agree with a
+        straight run to rounding, not bit for bit).
     precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
-        Autocast precision; auto = bfloat16 where the CPU computes it natively and a timed training step
-        is faster in it (:meth:`neuspike.train.loop.Trainer.choose_precision`), else float32.
+        Autocast precision; auto = bfloat16 where the device computes it natively and a timed training
+        step is faster in it (:meth:`neuspike.train.loop.Trainer.choose_precision`), else float32.
     params : dict
         Overrides of the method's registered parameters.
     init_from : str or None
@@ -316,14 +324,15 @@ class TrainSpec:
     val_every: int = 250
     checkpoint_every: int = 100
     threads: int | None = 1
+    device: str = "cpu"
     precision: str = "auto"
     params: dict[str, Any] = field(default_factory=dict)
     init_from: str | None = None
     export: bool = False
     export_dir: str | None = None
 
-    #: Fields that do not change what a run computes: a resumed run may change them.
-    NOT_IDENTITY: ClassVar[tuple[str, ...]] = ("out_dir", "threads", "export", "export_dir")
+    #: Fields that do not change what a run computes (the device only its rounding): a resumed run may change them.
+    NOT_IDENTITY: ClassVar[tuple[str, ...]] = ("out_dir", "threads", "device", "export", "export_dir")
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -341,6 +350,8 @@ class TrainSpec:
             raise InputError(f"lr: expected a positive number, got {self.lr!r}")
         if self.lr_min is not None and not 0 <= self.lr_min <= self.lr:
             raise InputError(f"lr_min: expected 0 <= lr_min <= lr ({self.lr}), got {self.lr_min}")
+        if not isinstance(self.device, str) or not self.device.strip():
+            raise InputError(f"device: expected a torch device name such as 'cpu' or 'cuda', got {self.device!r}")
         if self.precision not in ("auto", "float32", "bfloat16"):
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):

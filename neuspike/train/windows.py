@@ -227,7 +227,8 @@ class WindowTask:
     * **order**: step ``k`` uses the windows ``perm_e[j]`` of epoch ``e`` (a permutation drawn from
       ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``.
     * **inputs**: the method's own :meth:`~neuspike.methods.learned.LearnedMethod.encode` (one step), the
-      target the sample's ground truth (1, 1, H, W).
+      target the sample's ground truth (1, 1, H, W); drawn and augmented on the CPU, then moved to
+      the method's device (``method.device``), where the loss and the validation run.
     * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
@@ -246,8 +247,9 @@ class WindowTask:
         self.data: WindowData = spec.data
         self.method = method
         self.module = method.module
+        self.device = method.device
         self.fusion = method.params.get("spike_only") is False
-        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0)
+        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
 
     # -- data --------------------------------------------------------------------------------------
 
@@ -277,13 +279,13 @@ class WindowTask:
         inputs = [self.encode(s) for s in samples]
         stacked = [torch.cat([x[k] for x in inputs]) for k in range(len(inputs[0]))]
         target = torch.stack([torch.from_numpy(s.ground_truth)[None] for s in samples])
-        self.val_batch = (stacked, target)
+        self.val_batch = ([x.to(self.device) for x in stacked], target.to(self.device))
 
     def encode(self, sample: Sample) -> tuple[torch.Tensor, ...]:
         return tuple(self.method.encode(sample)[0])
 
     def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The inputs and targets of ``step`` (deterministic from the seed and the step)."""
+        """The inputs and targets of ``step`` (deterministic from the seed and the step), on the CPU."""
         spec = self.spec
         n = len(self.train_paths)
         first = step * spec.batch
@@ -335,6 +337,7 @@ class WindowTask:
         t0 = time.perf_counter()
         inputs, target = self.batch(step)
         t_data = time.perf_counter() - t0
+        inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
         with autocast():
             pred = self.forward(inputs, variant)
         loss, parts = self.loss(pred, target)
