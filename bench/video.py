@@ -26,19 +26,25 @@ Frames: the output instants start half a spike window (6.4 ms) into the recordin
 runs half a window past the last one, so every frame's spike window is centred on it (NeuSpike-Net
 refuses shifted windows) and every method sees the same frames. Learned methods stream (recurrent
 ones carry their state, NeuSpike-Net's representations slide); every learned method with weights
-runs: ours from ``neuspike/trained/``, FireNet's published ones from ``--weights``.
+runs: ours from ``neuspike/trained/``, FireNet's published ones from ``--weights``, on ``--device``
+(``cpu`` by default; ``cuda`` where torch sees a GPU; a device this machine lacks, or one that no
+requested method runs on, is refused before anything is simulated or written). A method's time ends
+when its image is back on the host: a learned method copies it from the device with a blocking copy
+(:meth:`neuspike.methods.learned.LearnedMethod.to_image`), so on a GPU the clock is read after the
+device's work, never while it is still queued.
 
 Size of the run: the issue's standard is a 1 s recording (``--full``: 20,000 planes, 1,000 frames per
 method at 1,000 frames/s; about 72 million events for this fan). On two shared cores that takes the
 slow methods (SNM, TFSTP, FireNet) many minutes each, so the default is the first 50 ms of the same
 recording (50 frames per method). A method that fails becomes a row with its error, not a crash.
 
-Outputs (``--out``, default ``reports/video/bench``): ``results.csv`` (one row per method),
-``metadata.json`` (spec, commit, versions, machine, threads), ``README.md`` (the table) and
+Outputs (``--out``, default ``reports/video/bench``): ``results.csv`` (one row per method; ``device``:
+the torch device of a learned method's row, empty for the others), ``metadata.json`` (spec with the
+device, commit, versions, machine, threads), ``README.md`` (the table) and
 ``accuracy_vs_speed.png`` (from ``results.csv`` alone; ``--plot-only`` redraws it).
 
     python -m bench.video [--full | --duration S] [--fps F] [--methods a,b] [--weights DIR]
-                          [--cache DIR] [--out DIR] [--threads N]
+                          [--device D] [--cache DIR] [--out DIR] [--threads N]
 """
 
 from __future__ import annotations
@@ -59,7 +65,8 @@ from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
-           "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "error")
+           "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "device",
+           "error")
 READ_ONLY = "read-only"
 SINGLE_FRAME = "tfp (single-frame calls)"
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "reports" / "video" / "bench"
@@ -82,6 +89,8 @@ class VideoBenchSpec:
     #: torch intra-op threads, set again before every method (compiled kernels of other stages may
     #: change the process's OpenMP thread count); ``None`` leaves torch's own choice
     threads: int | None = None
+    #: torch device of the learned methods (the others run on the CPU whatever it is)
+    device: str = "cpu"
 
 
 def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
@@ -123,15 +132,18 @@ def _row(**fields: Any) -> dict[str, Any]:
 def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: VideoBenchSpec,
                    weights_dir: Path | None) -> dict[str, Any]:
     """Stream one method over ``times``; its row (an ``error`` row when it fails)."""
-    from neuspike.methods import create_many, entry
+    from neuspike.methods import create_many, entry, uses_device
     from neuspike.video import stream_methods
     from neuspike.video.truth import FlickerMeter, score_frame
 
-    inputs = ""
+    inputs, device = "", None
     _apply_threads(spec)
     try:
-        inputs = "+".join(sorted(entry(name).inputs))
-        method = create_many([name], weights_dir=weights_dir, skip_unavailable=False)[name].method
+        e = entry(name)
+        inputs = "+".join(sorted(e.inputs))
+        device = spec.device if uses_device(e) else None  # a classical method alone would refuse a GPU device
+        method = create_many([name], weights_dir=weights_dir, device=device or "cpu",
+                             skip_unavailable=False)[name].method
         busy, psnrs, ssims, flicks, steps = 0.0, [], [], [], []
         meter = FlickerMeter()
         for sample, images, seconds in stream_methods([method], rec, times, event_history_s=spec.event_history_s):
@@ -152,10 +164,21 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
                     mean_psnr_db=float(np.mean(psnrs)), mean_ssim=float(np.mean(ssims)),
                     mean_flicker_rmse=float(np.mean(flicks)) if flicks else None,
                     normalisation=method.last_normalisation,
-                    steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), error="")
+                    steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), device=device,
+                    error="")
     except Exception as exc:  # a failing method is a row with its error, not a crash of the benchmark
-        return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps,
+        return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps, device=device,
                     error=one_line(exc))
+
+
+def _check_device(device: str, names: Sequence[str]) -> None:
+    """Refuse ``device`` before any work when no requested method can use it
+    (:func:`neuspike.methods.check_device` over the names the registry knows; an unknown name becomes
+    its own error row, as any method that fails)."""
+    from neuspike.methods import available, check_device, entry
+
+    known = set(available())
+    check_device(device, [entry(name) for name in names if name in known])
 
 
 def _threads() -> int:
@@ -210,8 +233,9 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     from neuspike.video.truth import ground_truth_for
     from neuspike.video.writers import check_writable
 
-    out = check_writable(out)
     names = list(spec.methods) or [n for n in available()]
+    _check_device(spec.device, names)  # before anything is simulated or the output folder is created
+    out = check_writable(out)
     _apply_threads(spec)
     run_meta = collect(executor={"kind": "in-process"}, threads_per_worker=torch.get_num_threads(),
                        start=now_iso(), contended=False)
@@ -285,12 +309,14 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         f"The fan at {spec.rpm:g} RPM, {spec.width}x{spec.height}, L = {spec.light:g}, simulated in continuous mode "
         f"({spec.duration_s:g} s of sensor time), streamed at {spec.fps:g} output frames per second of sensor time; "
         f"{len(frame)} rows. Machine: {m.get('cpu_model') or '?'}, {m.get('usable_cpus')} usable CPUs, torch threads "
-        f"{spec.threads if spec.threads is not None else 'torch default'} (per row: threads), load average {run_meta.get('load_average_start')} at the start and "
+        f"{spec.threads if spec.threads is not None else 'torch default'} (per row: threads), learned methods on "
+        f"device {spec.device}, load average {run_meta.get('load_average_start')} at the start and "
         f"{run_meta.get('load_average_end')} at the end; commit {run_meta.get('source', {}).get('commit', '?')}. "
         "frames/s is the method's own time (reading excluded; see the read-only rows); real-time factor = frames/s "
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"
-        + (" --full" if spec.duration_s >= 1.0 else "") + "`.",
+        + (" --full" if spec.duration_s >= 1.0 else "") + (f" --device {spec.device}" if spec.device != "cpu" else "")
+        + "`.",
         "",
         "| method | inputs | frames/s | real-time factor | PSNR (dB) | SSIM | flicker | steps/frame | threads | note |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -358,6 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--weights", type=Path, help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
     p.add_argument("--cache", type=Path, help="keep the simulated recording here and reuse it")
     p.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
+    p.add_argument("--device", default="cpu", help="torch device of the learned methods (default: cpu; e.g. cuda); "
+                   "refused when this machine lacks it or no requested method runs on a torch device")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -379,7 +407,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise InputError(f"--duration must be positive, got {duration}")
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
-                              height=args.size[1], event_history_s=args.event_history, threads=args.threads)
+                              height=args.size[1], event_history_s=args.event_history, threads=args.threads,
+                              device=args.device)
         rows = run(spec, args.out, cache=args.cache, weights_dir=weights_dir_from_env(args.weights),
                    progress=not args.no_progress)
     except NeuSpikeError as exc:

@@ -13,6 +13,7 @@ from neuspike.methods import create
 from neuspike.metrics import psnr
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.video import frame_times, open_recording, reconstruct_video
+from neuspike.video.truth import ground_truth_for
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +42,9 @@ def test_rows_columns_and_failing_method(bench_run):
     for f in ("README.md", "metadata.json", "accuracy_vs_speed.png"):
         assert (out / f).is_file()
     assert "| tfp | spikes |" in (out / "README.md").read_text()
-    assert json.loads((out / "metadata.json").read_text())["spec"]["duration_s"] == 0.005
+    spec = json.loads((out / "metadata.json").read_text())["spec"]
+    assert spec["duration_s"] == 0.005 and spec["device"] == "cpu"
+    assert frame["device"].isna().all()  # no row of this run ran on a torch device
 
 
 def test_accuracy_matches_an_independent_scoring(bench_run):
@@ -63,3 +66,14 @@ def test_cached_recording_is_reused(bench_run):
     assert vb.main([a if a != "tfp,events-highpass,zz-none" else "tfp" for a in argv]) == 0
     assert (cache / "meta.json").stat().st_mtime_ns == stamp
     assert list(pd.read_csv(out / "results.csv")["method"])[2:] == [vb.SINGLE_FRAME, "tfp"]
+
+
+def test_a_learned_methods_row_names_the_device_it_ran_on(bench_run):
+    _, cache, _ = bench_run
+    spec = vb.VideoBenchSpec(duration_s=0.005, fps=2000.0, width=48, height=32)
+    times = frame_times(vb.MARGIN_S, vb.MARGIN_S + spec.duration_s, spec.fps)
+    with open_recording(cache) as rec:
+        truth = ground_truth_for(cache, rec.meta, height=rec.height, width=rec.width, tolerance_s=0.5 / spec.fps)
+        rows = {name: vb.measure_method(name, rec, times, truth, spec, None) for name in ("firenet-sim", "tfp")}
+    assert rows["firenet-sim"]["status"] == "ok" and rows["firenet-sim"]["device"] == "cpu"
+    assert rows["tfp"]["status"] == "ok" and rows["tfp"]["device"] is None  # a classical method has none
