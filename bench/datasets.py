@@ -297,18 +297,20 @@ def run_dataset(spec: DatasetSpec, out_dir: str | os.PathLike, execution: Execut
     Raises
     ------
     InputError
-        A bad manifest (naming the recording), unknown methods, invalid options, before any work.
+        A bad manifest (naming the recording), unknown methods, an unusable device, invalid options,
+        before any work and before ``out_dir`` is created.
     ConfigMismatch
         ``out_dir`` holds results of another dataset run and ``execution.force`` is false.
     """
     from neuspike.formats.staging import check_writable_folder
 
     t_start = time.perf_counter()
-    out = check_writable_folder(out_dir, what="output folder")
+    out = check_writable_folder(out_dir, what="output folder", create=False)
     if resolved is None:
         resolved = prepare(spec)
     executor, threads, remote, setup = prepare_execution(execution, spec.weights)
-    identity, tasks = plan(spec, setup, resolved)
+    identity, tasks = plan(spec, setup, resolved)  # unknown names and an unusable device refuse here
+    check_writable_folder(out, what="output folder")  # every input accepted: only now is the folder created
     stale = check_config(out, identity, execution.force, key="dataset")
     write_manifest(out / MANIFEST_NAME, spec.manifest)
     outcome = run_tasks(

@@ -529,20 +529,22 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     Raises
     ------
     InputError
-        Unknown methods or invalid options (before anything runs).
+        Unknown methods, an unusable device or invalid options (before anything runs, and before
+        ``out_dir`` is created: a refused sweep leaves no folder behind).
     ConfigMismatch
         ``out_dir`` holds results of a different sweep and ``execution.force`` is false.
     """
     from neuspike.formats.staging import check_writable_folder
 
     t_start = time.perf_counter()
-    out = check_writable_folder(out_dir, what="output folder")
+    out = check_writable_folder(out_dir, what="output folder", create=False)
     preflight(spec)
     executor, threads, remote, setup = prepare_execution(execution, spec.weights)
 
-    resolved = resolve_methods(spec, setup)
+    resolved = resolve_methods(spec, setup)  # unknown names and an unusable device refuse here
     arith = arithmetic(spec, setup)
     sweep_config = {**spec.as_dict(), "harness_version": HARNESS_VERSION, "resolved": resolved, **arith}
+    check_writable_folder(out, what="output folder")  # every input accepted: only now is the folder created
     stale = check_config(out, sweep_config, execution.force)
     cache_dir = None
     if execution.use_cache:
