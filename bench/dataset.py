@@ -117,6 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from bench import manifest as mf
         from bench.datasets import DatasetSpec, prepare, run_dataset
         from bench.harness import Execution
+        from neuspike import methods as registry
         from neuspike.formats.staging import check_writable_folder
         from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
@@ -138,7 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"inferred the {manifest.layout} layout: {len(manifest.recordings)} recording(s)", file=sys.stderr)
             for note in manifest.notes:
                 print(f"note: {note}", file=sys.stderr)
-        check_writable_folder(out, what="--out")
+        check_writable_folder(out, what="--out", create=False)  # created only once every input is accepted
         if args.infer_only:
             path = mf.write_manifest(out / mf.MANIFEST_NAME, manifest)
             print(f"manifest: {path}")
@@ -149,6 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise InputError(f"{origin}: {str(weights)!r} is not a folder")
         spec = DatasetSpec(name=folder.resolve().name, root=str(folder), manifest=manifest, methods=_methods(args),
                            weights=str(weights) if weights is not None else None)
+        # an unusable device refuses before anything is announced (run_dataset checks the methods it runs)
+        registry.check_device(args.device, [registry.entry(name) for name in spec.methods])
         resolved = prepare(spec)
         n = sum(len(r.instants) for r in resolved)
         damaged = [r.recording.name for r in resolved if r.damaged]

@@ -378,7 +378,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.out:
             from neuspike.formats.staging import check_writable_folder
 
-            check_writable_folder(Path(args.out), what="--out")  # before measuring, not after
+            # before measuring, not after; created by the first write, so a refusal leaves no folder
+            check_writable_folder(Path(args.out), what="--out", create=False)
         weights = weights_dir_from_env(args.weights)
         if weights is not None and not weights.is_dir():
             raise InputError(f"weights folder {str(weights)!r} is not a folder")

@@ -175,9 +175,12 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
         execution = execution_from_args(args)
         out = Path(args.out or default_out)
         from bench.harness import run_sweep
+        from neuspike import methods as registry
         from neuspike.formats.staging import check_writable_folder
 
-        check_writable_folder(out, what="--out")  # before any work; run_sweep checks the cells
+        # before any work and before anything is announced or created; run_sweep checks the cells
+        registry.check_device(execution.device, [registry.entry(name) for name in spec.methods])
+        check_writable_folder(out, what="--out", create=False)
         print(f"{spec.name} sweep: {len(spec.grid.cells())} cells x {len(spec.methods)} methods -> {out}",
               file=sys.stderr)
         outcome = run_sweep(spec, out, execution)

@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> Path:
     out = Path(args.out or ("runs/timing-full" if args.full else "runs/timing"))
     from neuspike.formats.staging import check_writable_folder
 
-    check_writable_folder(out, what="--out")  # before any measurement
+    check_writable_folder(out, what="--out", create=False)  # before any measurement; created by the first write
 
     results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
     results = None
