@@ -175,7 +175,7 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "weights": portable_path(weights) if weights is not None else None}}
+                         "device": args.device, "weights": portable_path(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": command_line(), "executor": {"executor": "timing", "workers": 1},
