@@ -184,6 +184,11 @@ def time_method(method: Any, sample: Any, *, repeats: int, warmup: int,
 
     For recurrent methods that report ``last_steps`` (the event windows one call stepped through),
     :attr:`MethodTiming.steps` holds it, so that the cost of one step can be derived.
+
+    On a GPU the clock is read after the device's work, with no synchronisation here: a call returns
+    a host array, which a learned method copies from its device with a blocking copy
+    (:meth:`neuspike.methods.learned.LearnedMethod.to_image`). The same holds for
+    :func:`time_streaming`.
     """
     stats = time_callable(lambda: method.reconstruct(sample), repeats=repeats, warmup=warmup,
                           setup=method.reset, timer=timer)
