@@ -69,16 +69,24 @@ def step_gflop(method: Any, sample: Any) -> float | None:
     return count_module_gflop(module, inputs, recurrent=bool(getattr(method, "recurrent", False)))
 
 
-def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3) -> float:
-    """The rate (GFLOP/s) of a ``side`` x ``side`` float32 matrix product on the CPU with torch's
-    current threads: the reference a network's achieved rate is read against."""
+def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3, device: str = "cpu") -> float:
+    """The rate (GFLOP/s) of a ``side`` x ``side`` float32 matrix product on ``device`` (on the CPU with
+    torch's current threads): the reference a network's achieved rate on that device is read against.
+    A CUDA device is synchronised inside each timed call."""
     import torch
 
+    dev = torch.device(device)
     gen = torch.Generator().manual_seed(0)
-    a = torch.rand(side, side, generator=gen)
-    b = torch.rand(side, side, generator=gen)
-    out = torch.empty(side, side)
-    stats = time_callable(lambda: torch.mm(a, b, out=out), repeats=repeats, warmup=1)
+    a = torch.rand(side, side, generator=gen).to(dev)
+    b = torch.rand(side, side, generator=gen).to(dev)
+    out = torch.empty(side, side, device=dev)
+
+    def product() -> None:
+        torch.mm(a, b, out=out)
+        if dev.type == "cuda":
+            torch.cuda.synchronize(dev)
+
+    stats = time_callable(product, repeats=repeats, warmup=1)
     median_s = float(np.median(stats.samples_ms)) / 1000.0
     return 2.0 * side**3 / median_s / 1e9
 
@@ -383,9 +391,10 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
     if learned:
         if threads is not None:
             set_threads(threads)
-        reference = matmul_gflop_s()
+        reference = matmul_gflop_s(device=device)
         if log:
-            log(f"reference: a {MATMUL_SIDE}x{MATMUL_SIDE} float32 matrix product runs at {reference:.1f} GFLOP/s")
+            log(f"reference: a {MATMUL_SIDE}x{MATMUL_SIDE} float32 matrix product on {device} runs at "
+                f"{reference:.1f} GFLOP/s")
     rows = []
     streaming = any(method is not None and streams(method) for method, _ in created.values())
     for width, height in sizes:
