@@ -7,8 +7,8 @@ instance-normalised features see other statistics, and the correction channel of
 head can shift a whole image. This check simulates 400x250 pans and stills of four training
 photographs (astronaut, brick, coffee, rocket) at L = 1/32, 1/8, 1/2, without noise and at the high
 noise level, seed 0, and prints the mean PSNR and affine-aligned PSNR of `neuspike-net` for each
-weights folder (default: the shipped weights). It decides between candidate weights without
-touching the test photographs.
+weights folder (default: the shipped weights), with the head its card names. It decides between
+candidate weights without touching the test photographs.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import torch
 from bench import grid as grids
 from neuspike.conditions import Condition
 from neuspike.methods import create
+from neuspike.methods.weights import read_card
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
@@ -36,17 +37,22 @@ def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
 def main(argv: list[str] | None = None) -> int:
     folders = (argv if argv is not None else sys.argv[1:]) or [None]
     torch.set_num_threads(2)
-    samples = []
+    samples, keys = [], []
     for photo in PHOTOS:
         for kind in ("pan", "still"):
             scene = grids.scene_entry(f"{kind}:{photo}", (400, 250))
             for light in LIGHTS:
                 for noise in NOISES:
                     cond = Condition(light=light, motion=128, noise=noise, effects=grids.DEFAULT_EFFECTS)
+                    keys.append((light, noise))
                     samples.append(simulate_sample(scene.spec, cond, sensor=SensorConfig(), seed=0,
                                                    modalities=("spikes", "events")))
     for folder in folders:
-        method = create("neuspike-net", weights_dir=folder, precision="float32")
+        head = {}  # the head the weights were trained with (their card), so any candidate loads
+        card = read_card(f"{folder}/neuspike-net.safetensors") if folder else None
+        if card and "head" in card.get("model", {}).get("params", {}):
+            head = {"head": card["model"]["params"]["head"]}
+        method = create("neuspike-net", weights_dir=folder, precision="float32", **head)
         raw, aligned = [], []
         for sample in samples:
             y, truth = method.reconstruct(sample), sample.ground_truth
@@ -56,6 +62,10 @@ def main(argv: list[str] | None = None) -> int:
             aligned.append(_psnr(np.clip(a * y + b, 0, 1), truth))
         print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
               f"affine-aligned {np.mean(aligned):.2f}")
+        for key in dict.fromkeys(keys):  # each light and noise level: raw / aligned
+            pick = [i for i, k in enumerate(keys) if k == key]
+            print(f"    L = 1/{round(1 / key[0])}, noise {key[1]}: {np.mean([raw[i] for i in pick]):.2f} / "
+                  f"{np.mean([aligned[i] for i in pick]):.2f}")
     return 0
 
 
