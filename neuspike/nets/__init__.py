@@ -6,9 +6,10 @@ Architecture (REFERENCE §1.1; :mod:`neuspike.nets.network`): two 3-level stride
 input-level skip ``x_t^0 + w x_m^0``, instance norm before ReLU, and a prediction head; any input
 size (padded to multiples of 8, cropped back). The paper's head (a convolution and tanh mapped to
 [0, 1], ``head="tanh"``) compressed contrast by about 8 % on bright scenes, since the instance-normalised
-features carry no absolute scale; the shipped weights use ``head="support"``: a per-pixel softmax
-over the spike representation's 32 radiance estimates (the temporal support the motion allows) plus
-an additive correction (:mod:`neuspike.nets.network`).
+features carry no absolute scale; the shipped weights use ``head="support-count"``: a per-pixel
+softmax over the spike representation's 32 radiance estimates (the temporal support the motion
+allows) plus an additive correction counted in spikes per group and scaled by the data's own spike
+quantum (:mod:`neuspike.nets.network`).
 
 Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
 :mod:`neuspike.nets.fusion`), chosen by a short measured ablation: each candidate trained from the
@@ -54,7 +55,7 @@ __all__ = [
 
 #: The design the ablation chose (T_spike, T_event, F).
 DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "event_representation": "contrast",
-                                  "fusion": "gate", "head": "support"}
+                                  "fusion": "gate", "head": "support-count"}
 
 
 def register_methods(register: Callable[..., Any]) -> None:

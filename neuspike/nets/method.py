@@ -85,9 +85,10 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``w`` of the input-level skip (1 on simulated data; the paper uses the maximum of the event
         integration on real data).
     head : str
-        The prediction head (:data:`neuspike.nets.network.HEADS`): ``"tanh"`` (the paper's) or
+        The prediction head (:data:`neuspike.nets.network.HEADS`): ``"tanh"`` (the paper's),
         ``"support"`` (a per-pixel choice among the spike representation's radiance estimates plus a
-        correction, which keeps the absolute scale).
+        correction, which keeps the absolute scale) or ``"support-count"`` (the same with the
+        correction counted in spikes per group; the shipped weights).
     **learned
         :class:`~neuspike.methods.learned.LearnedMethod`'s arguments (weights, device, precision).
     """

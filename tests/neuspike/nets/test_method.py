@@ -180,7 +180,7 @@ def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tm
     assert create("neuspike-net", weights_dir=tmp_path, head="tanh").module.head == "tanh"
     with pytest.raises(FormatError, match="trained for"):
         create("neuspike-net", weights_dir=tmp_path, head="support")
-    assert DEFAULT_DESIGN["head"] == "support" == create("neuspike-net").module.head  # the shipped weights
+    assert DEFAULT_DESIGN["head"] == "support-count" == create("neuspike-net").module.head  # the shipped weights
 
 
 def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
@@ -196,4 +196,5 @@ def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
     inputs = method.encode(sample)[0]
     assert len(inputs) == 3 and inputs[-1].shape == (1, 1, H, W)
     assert torch.all(inputs[-1] == torch.tensor(q, dtype=torch.float32))
-    assert len(NeuSpikeNetMethod.for_training("neuspike-net", **design).encode(sample)[0]) == 2  # support: none
+    support = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support"})
+    assert len(support.encode(sample)[0]) == 2  # the support head takes none
