@@ -75,6 +75,8 @@ def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3, device: str = "cpu
     A CUDA device is synchronised inside each timed call."""
     import torch
 
+    from neuspike.methods.learned import synchronize
+
     dev = torch.device(device)
     gen = torch.Generator().manual_seed(0)
     a = torch.rand(side, side, generator=gen).to(dev)
@@ -83,8 +85,7 @@ def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3, device: str = "cpu
 
     def product() -> None:
         torch.mm(a, b, out=out)
-        if dev.type == "cuda":
-            torch.cuda.synchronize(dev)
+        synchronize(dev)
 
     stats = time_callable(product, repeats=repeats, warmup=1)
     median_s = float(np.median(stats.samples_ms)) / 1000.0

@@ -52,7 +52,7 @@ from neuspike.methods import Method
 from neuspike.sample import Sample
 from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
 
-__all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision"]
+__all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision", "synchronize"]
 
 PRECISIONS = ("auto", "float32", "bfloat16")
 #: Label of the default read-out: the module's output clamped to [0, 1].
@@ -89,6 +89,13 @@ def resolve_device(device: str | torch.device | None) -> torch.device:
     if dev.type in ("mps", "xpu") and not (backend is not None and backend.is_available()):
         raise InputError(f"device: {device!r} was asked for but this machine has no {dev.type.upper()} device")
     return dev
+
+
+def synchronize(device: torch.device) -> None:
+    """Wait for the work queued on ``device`` (a CUDA device; others run synchronously): call before
+    reading a clock that times it."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
 
 
 def resolve_precision(precision: str, device: torch.device) -> str:
@@ -191,8 +198,7 @@ class LearnedMethod(Method):
                 if precision == "bfloat16":
                     stack.enter_context(torch.autocast(self.device.type, dtype=torch.bfloat16))
                 out = self.module(*inputs, None) if self.recurrent else self.module(*inputs)
-                if self.device.type == "cuda":
-                    torch.cuda.synchronize(self.device)
+                synchronize(self.device)
                 return out
 
         choice, record = choose_precision(module_identity(type(self), self.params), str(self.device),

@@ -44,12 +44,13 @@ from typing import Any, Iterator
 import torch
 
 from neuspike.errors import InputError
+from neuspike.methods.learned import resolve_device, resolve_precision, synchronize
 from neuspike.train import checkpoint as ck
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 from neuspike.utils.checks import check_positive_int
 from neuspike.utils.parallel import set_threads
 
-__all__ = ["STALE_SHARD_S", "Trainer", "synchronize", "train", "training_method"]
+__all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
 
 #: A shard's temporaries older than this are a killed run's (one item is written in well under a second).
 STALE_SHARD_S = 600.0
@@ -75,19 +76,10 @@ def training_method(spec: TrainSpec, device: str | torch.device = "cpu"):
 BF16_FASTER = 0.9
 
 
-def synchronize(device: torch.device) -> None:
-    """Wait for the work queued on ``device`` (a CUDA device; others run synchronously): call before
-    reading a clock that times it."""
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
 class Trainer:
     """One training run of ``spec`` (module docstring)."""
 
     def __init__(self, spec: TrainSpec, *, quiet: bool = False) -> None:
-        from neuspike.methods.learned import resolve_device, resolve_precision
-
         self.device = resolve_device(spec.device)  # first: a missing device is refused before any work
         self.spec = spec
         self.quiet = quiet
