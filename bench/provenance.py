@@ -79,7 +79,19 @@ def machine() -> dict[str, Any]:
         "logical_cpus": os.cpu_count(),
         "usable_cpus": usable,
         "memory_bytes": _memory_bytes(),
+        "gpus": _gpu_names(),
     }
+
+
+def _gpu_names() -> list[str]:
+    """The CUDA devices torch sees, by name (empty without one, or without torch imported)."""
+    torch = sys.modules.get("torch")  # only a command that runs networks has imported it; importing costs seconds
+    try:
+        if torch is None or not torch.cuda.is_available():
+            return []
+        return [torch.cuda.get_device_name(i) for i in range(torch.cuda.device_count())]
+    except Exception:  # a broken driver must not stop the run that records it
+        return []
 
 
 def command_line(argv: list[str] | None = None) -> list[str]:

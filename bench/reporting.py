@@ -292,7 +292,11 @@ def _write_table(tables_dir: Path, name: str, markdown: str, frame: pd.DataFrame
 def write_timing_tables(tables_dir: Path, timing: pd.DataFrame, metadata: dict[str, Any]) -> list[Path]:
     """``tables/timing.md`` and ``tables/timing.csv`` from Table 2 rows (what ``bench.timing`` writes)."""
     threads = sorted({int(v) for v in timing["threads"].dropna()}) if "threads" in timing else []
-    machine = (metadata.get("machine") or {}).get("cpu_model", "")
+    info = metadata.get("machine") or {}
+    machine = info.get("cpu_model", "")
+    devices = {str(d) for d in timing.get("device", pd.Series(dtype=str)).dropna() if str(d).startswith("cuda")}
+    if devices and info.get("gpus"):  # the learned methods ran on a GPU: name it first
+        machine = f"{info['gpus'][0]} (learned methods) and {machine or 'an unnamed CPU'} (the others)"
     md = tb.timing_markdown(timing, threads=",".join(map(str, threads)) or None, machine=machine)
     written: list[Path] = []
     _write_table(Path(tables_dir), "timing", md, timing, written)

@@ -573,7 +573,9 @@ def timing_markdown(timing: pd.DataFrame, threads: Any = None, machine: str = ""
                 cells.append(str(r["status"]))
             else:
                 cells.append(f"{fmt(r['ms_per_frame'], 'ms')} [{fmt(r['min_frame_ms'], 'ms')}-{fmt(r['max_frame_ms'], 'ms')}]")
-        rows.append([m, fam.get(m, "unknown"), f"{params:,}" if params else "-", *cells])
+        kinds = [str(v) for v in sub["precision"] if isinstance(v, str) and v] if "precision" in sub else []
+        rows.append([m, fam.get(m, "unknown"), f"{params:,}" if params else "-", "/".join(dict.fromkeys(kinds)) or "-",
+                     *cells])
     where = f" on {machine}" if machine else ""
     thr = f", {threads} torch thread(s)" if threads is not None else ""
     parts = [
@@ -581,8 +583,8 @@ def timing_markdown(timing: pd.DataFrame, threads: Any = None, machine: str = ""
         f"Ours{where}{thr}: median ms per frame [min-max] over the timed runs after warm-up. "
         "Recurrent methods: ms per network step (one voxel grid), i.e. one reconstruct call divided by the "
         "event windows it processed; the whole call, warm-up included, is in timing.csv (`median_ms`).\n\n",
-        markdown_table(["method", "family", "parameters", *resolutions], rows,
-                       ["l", "l", "r"] + ["r"] * len(resolutions)),
+        markdown_table(["method", "family", "parameters", "precision", *resolutions], rows,
+                       ["l", "l", "r", "l"] + ["r"] * len(resolutions)),
     ]
     flops = ("gflop_per_step", "gflop_s", "flop_bound_ms", "matmul_gflop_s", "ms_per_frame")
     counted = timing.iloc[:0]

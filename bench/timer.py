@@ -33,7 +33,7 @@ from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS, SensorConfig
 LIGHT, MOTION, PLANES = 0.25, 128, 256
 
 TIMING_COLUMNS = ("method", "family", "inputs", "resolution", "width", "height", "status", "error", "threads",
-                  "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms", "q3_ms", "steps",
+                  "device", "precision", "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms", "q3_ms", "steps",
                   "ms_per_frame", "min_frame_ms", "max_frame_ms", "gflop_per_step", "gflop_s", "flop_bound_ms",
                   "matmul_gflop_s", "cold_ms", "stream_ms", "stream_min_ms", "stream_max_ms", "stream_steps")
 #: Output rate of the running video a streaming method is timed on (frames per second of sensor time).
@@ -333,14 +333,16 @@ def cut_spike_window(sample: Any, planes: int) -> Any:
 # ----------------------------------------------------------------------------------------------
 
 def create_methods(names: Sequence[str], *, weights_dir: str | os.PathLike | None = None,
-                   device: str = "cpu") -> dict[str, tuple[Any, str]]:
+                   device: str = "cpu", precision: str | None = None) -> dict[str, tuple[Any, str]]:
     """``{name: (method or None, reason)}``: each method created once by
     :func:`neuspike.methods.create_many`; a method that cannot be created gives ``None`` and
     ``"skipped: ..."`` (``MethodUnavailable``) or ``"error: ..."`` (anything else). Unknown names and
-    an unusable device raise :class:`~neuspike.errors.InputError` before anything is built."""
+    an unusable device raise :class:`~neuspike.errors.InputError` before anything is built. ``precision``
+    (``None``: each method's own, ``"auto"`` for the learned ones) is given to every learned method."""
     from neuspike import methods as registry
 
-    made = registry.create_many(list(names), weights_dir=weights_dir, device=device, keep_errors=True)
+    made = registry.create_many(list(names), weights_dir=weights_dir, device=device, precision=precision,
+                                keep_errors=True)
     out: dict[str, tuple[Any, str]] = {}
     for name, c in made.items():
         if c.unavailable is not None:
@@ -367,13 +369,18 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
             params = int(method.parameter_count())
         except Exception:
             params = 0
-    return {"family": tb.family_of(ins), "inputs": "+".join(sorted(ins)), "parameters": params}
+    # a learned method's device and the precision it runs in ("auto" resolved); empty for the others
+    learned = method is not None and getattr(method, "module", None) is not None
+    device = str(getattr(method, "device", "")) if learned else ""
+    precision = str(method.params.get("precision", "")) if learned else ""
+    return {"family": tb.family_of(ins), "inputs": "+".join(sorted(ins)), "parameters": params,
+            "device": device, "precision": precision}
 
 
 def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: int, warmup: int,
             history_windows: float = DEFAULT_HISTORY_WINDOWS, seed: int = 0,
-            weights_dir: str | os.PathLike | None = None, device: str = "cpu", threads: int | None = None,
-            log: Callable[[str], Any] | None = None) -> pd.DataFrame:
+            weights_dir: str | os.PathLike | None = None, device: str = "cpu", precision: str | None = None,
+            threads: int | None = None, log: Callable[[str], Any] | None = None) -> pd.DataFrame:
     """Table 2 rows (:data:`TIMING_COLUMNS`): every method at every size.
 
     Each size's recording is simulated once (:func:`representative_sample`); each method is
@@ -385,7 +392,7 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
 
     repeats = check_count("repeats", repeats, 1)
     warmup = check_count("warmup", warmup, 0)
-    created = create_methods(names, weights_dir=weights_dir, device=device)
+    created = create_methods(names, weights_dir=weights_dir, device=device, precision=precision)
     needs = {m for name, (method, _) in created.items() if method is not None for m in method.inputs}
     learned = any(getattr(method, "module", None) is not None for method, _ in created.values())
     reference = None

@@ -114,6 +114,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
                                           "the suite's own trained weights need no flag")
     parser.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
+    parser.add_argument("--precision", choices=("auto", "float32", "bfloat16"), default="auto",
+                        help="precision of the learned methods (default: auto, bfloat16 only where a measured step "
+                        "is faster than float32 on this device); the row's precision column says what ran")
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -175,7 +178,7 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "device": args.device, "weights": portable_path(weights) if weights is not None else None}}
+                         "device": args.device, "precision": args.precision, "weights": portable_path(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": command_line(), "executor": {"executor": "timing", "workers": 1},
@@ -183,7 +186,7 @@ def run(args: argparse.Namespace) -> Path:
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
-                     weights_dir=weights, device=args.device, threads=args.threads,
+                     weights_dir=weights, device=args.device, precision=args.precision, threads=args.threads,
                      log=lambda s: (watch.read(), print(s, file=sys.stderr, flush=True)))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
     meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0, **watch.summary()}

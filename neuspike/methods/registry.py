@@ -321,7 +321,7 @@ def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, .
 
 
 def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.PathLike | None = None,
-                device: str = "cpu", skip_unavailable: bool = True,
+                device: str = "cpu", precision: str | None = None, skip_unavailable: bool = True,
                 keep_errors: bool = False) -> dict[str, Created]:
     """Create each of ``names`` once, the way every front end does (commands, sweeps, timings).
 
@@ -334,6 +334,9 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
         Registered names, without repeats.
     weights_dir, device :
         As for :func:`create`.
+    precision : str or None
+        The precision of every learned method (``"auto"``, ``"float32"`` or ``"bfloat16"``); ``None``
+        keeps each entry's own. Methods that run on no torch device ignore it.
     skip_unavailable : bool
         ``True``: a method that cannot run here (:class:`MethodUnavailable`) is returned with
         ``unavailable`` set (a sweep's skipped row); ``False``: it raises :class:`MethodUnavailable`
@@ -357,10 +360,16 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
         raise InputError(f"methods repeat a name: {names}")
     entries = [entry(name) for name in names]  # unknown names raise, listing the known ones
     check_device(device, entries)
+    if precision is not None:
+        from neuspike.methods.learned import PRECISIONS
+
+        if precision not in PRECISIONS:
+            raise InputError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     out: dict[str, Created] = {}
-    for name in names:
+    for name, e in zip(names, entries):
+        extra = {"precision": precision} if precision is not None and uses_device(e) else {}
         try:
-            out[name] = Created(name, create(name, weights_dir=weights_dir, device=device))
+            out[name] = Created(name, create(name, weights_dir=weights_dir, device=device, **extra))
         except MethodUnavailable as exc:
             if not skip_unavailable:
                 raise MethodUnavailable(f"method {name!r} is unavailable: {exc}") from None

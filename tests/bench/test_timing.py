@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -306,3 +307,18 @@ def test_table_2_and_the_chart_label_the_cold_start_and_the_streaming_cost():
     assert "**cold start**" in md and "| e2vid | 32x24 | 400 (16 steps) | 50 [45-60] (2.0 steps) | 8.0x |" in md
     joined = timer.join_accuracy(results_for({"e2vid": 12.0}), frame, "runs/x").set_index("method")
     assert joined.loc["e2vid", "ms_per_frame"] == 400.0 and joined.loc["e2vid", "stream_ms"] == 50.0
+
+
+def test_measure_runs_learned_methods_in_the_precision_asked_and_says_so(test_methods):
+    """``precision`` reaches every learned method and none of the others; each row names what ran."""
+    frame = timer.measure(["neuspike-net-spike", "tt-mean"], [(32, 24)], repeats=1, warmup=0, history_windows=0.0,
+                          precision="bfloat16")
+    by = frame.set_index("method")
+    assert by.loc["neuspike-net-spike", "status"] == "ok", by.loc["neuspike-net-spike", "error"]
+    assert by.loc["neuspike-net-spike", "precision"] == "bfloat16" and by.loc["neuspike-net-spike", "device"] == "cpu"
+    assert by.loc["tt-mean", "precision"] == "" and by.loc["tt-mean", "device"] == ""
+    assert re.search(r"\| neuspike-net-spike \| spike \| [\d,]+ \| bfloat16 \|", tb.timing_markdown(frame))
+    made = registry.create_many(["neuspike-net-spike"], precision="float32")
+    assert made["neuspike-net-spike"].method.params["precision"] == "float32"
+    with pytest.raises(InputError, match="precision: expected one of auto, float32, bfloat16, got 'half'"):
+        registry.create_many(["neuspike-net-spike", "tt-mean"], precision="half")
