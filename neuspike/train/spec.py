@@ -108,6 +108,10 @@ class WindowData:
         Processes that simulate the shard (not part of the run's identity).
     ssim_weight, ssim_window : float, int
         Loss = L1 + ssim_weight * kornia SSIM loss (window ``ssim_window``).
+    offset_weight : float
+        Adds offset_weight * |mean(output) - mean(truth)| per crop (averaged over the batch): an error
+        of the whole image's level, to which the SSIM term is blind and which the per-pixel L1
+        weighs no more than any other error. Default 0 (the term is off; earlier specs mean 0).
     spike_only_fraction : float
         Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
         spike-only variant inside the same weights.
@@ -128,6 +132,7 @@ class WindowData:
     ssim_weight: float = 1.0
     ssim_window: int = 11
     spike_only_fraction: float = 0.3
+    offset_weight: float = 0.0
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -135,6 +140,9 @@ class WindowData:
             _whole(name, getattr(self, name), 1)
         if not 0.0 <= self.spike_only_fraction <= 1.0:
             raise InputError(f"spike_only_fraction: expected a fraction in [0, 1], got {self.spike_only_fraction}")
+        if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
+            raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
+        put(self, "offset_weight", float(self.offset_weight))
         lo, hi = (float(v) for v in self.light_range)
         if not 0 < lo <= hi:
             raise InputError(f"light_range: expected 0 < low <= high, got {self.light_range}")

@@ -229,7 +229,8 @@ class WindowTask:
     * **inputs**: the method's own :meth:`~neuspike.methods.learned.LearnedMethod.encode` (one step), the
       target the sample's ground truth (1, 1, H, W); drawn and augmented on the CPU, then moved to
       the method's device (``method.device``), where the loss and the validation run.
-    * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1).
+    * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1)
+      + ``offset_weight`` * the mean absolute error of each crop's mean level (0 by default).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
@@ -327,6 +328,9 @@ class WindowTask:
         l1 = (pred - target).abs().mean()
         ssim = self.ssim_loss(pred, target)
         loss = l1 + self.data.ssim_weight * ssim
+        if self.data.offset_weight:
+            offset = (pred.mean(dim=(-2, -1)) - target.mean(dim=(-2, -1))).abs().mean()
+            loss = loss + self.data.offset_weight * offset
         return loss, {"l1": l1.item(), "ssim_loss": ssim.item()}
 
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:

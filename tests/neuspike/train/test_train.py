@@ -171,3 +171,30 @@ def test_auto_precision_takes_bfloat16_only_when_a_measured_step_is_faster_and_a
     assert json.loads((tmp_path / "run" / "precision.json").read_text())["ms_per_step"]["bfloat16"] == 80.0
     plain = Trainer(tiny_spec(tmp_path / "f32", precision="float32"), quiet=True).choose_precision()
     assert plain == {"choice": "float32", "requested": "float32", "measured": False}
+
+
+def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
+    """A constant shift c of a crop costs offset_weight * |c| more than without the term; a crop whose
+    level is right costs nothing more; the weight is checked and old specs mean 0."""
+    from neuspike.methods import create
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    method = create("neuspike-net-spike", precision="float32")
+    gen = torch.Generator().manual_seed(0)
+    target = torch.rand(2, 1, 24, 24, generator=gen) * 0.5 + 0.25
+    shifted = target + torch.tensor([0.05, -0.02]).view(2, 1, 1, 1)
+    tasks = {w: WindowTask(TrainSpec(data=WindowData(offset_weight=w)), method) for w in (0.0, 3.0)}
+    base, _ = tasks[0.0].loss(shifted, target)
+    with_term, _ = tasks[3.0].loss(shifted, target)
+    assert float(with_term - base) == pytest.approx(3.0 * (0.05 + 0.02) / 2, rel=1e-5)
+    texture = target + 0.1 * (torch.rand(2, 1, 24, 24, generator=gen) - 0.5)
+    texture = texture - texture.mean(dim=(-2, -1), keepdim=True) + target.mean(dim=(-2, -1), keepdim=True)
+    assert float(tasks[3.0].loss(texture, target)[0] - tasks[0.0].loss(texture, target)[0]) == pytest.approx(0.0, abs=1e-6)
+    for bad in (-1.0, float("nan"), float("inf"), "1"):
+        with pytest.raises(InputError, match="offset_weight"):
+            WindowData(offset_weight=bad)
+    assert WindowData().offset_weight == 0.0
+    earlier = TrainSpec(data=WindowData()).as_dict()  # a spec file written before the term existed
+    del earlier["data"]["offset_weight"]
+    assert spec_from_dict(earlier).data.offset_weight == 0.0
