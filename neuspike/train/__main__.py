@@ -17,7 +17,7 @@ import sys
 from typing import Any, Sequence
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
-WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range")
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
 #: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
@@ -106,6 +106,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="single windows: fraction of steps training the spike-only variant of a fusion network "
                         "(default 0.3)")
     d.add_argument("--workers", type=int, help="single windows: processes simulating windows (default 2)")
+    d.add_argument("--val-view", metavar="WxH",
+                   help="single windows: validate on windows of this size (e.g. 400x250, the sweeps' frame) "
+                        "instead of the square training view, so the best step is chosen on whole frames")
+    d.add_argument("--offset-weight", type=float, metavar="W",
+                   help="single windows: add W x the error of each crop's mean level to the loss (default 0)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -166,7 +171,8 @@ def spec_from_args(args: argparse.Namespace):
     for name in top:
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
-    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction"):
+    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
+                 "offset_weight"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:
@@ -180,10 +186,11 @@ def spec_from_args(args: argparse.Namespace):
             raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}") from None
         if len(kw["speed_range"]) != 2:
             raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}")
-    if args.view is not None:
-        from neuspike.utils.checks import parse_size
+    for name in ("view", "val_view"):
+        if getattr(args, name) is not None:
+            from neuspike.utils.checks import parse_size
 
-        kw["view"] = parse_size(args.view)
+            kw[name] = parse_size(getattr(args, name))
     for name in ("kinds", "noise_levels"):
         if getattr(args, name) is not None:
             kw[name] = _list(getattr(args, name))

@@ -108,6 +108,10 @@ class WindowData:
         Processes that simulate the shard (not part of the run's identity).
     ssim_weight, ssim_window : float, int
         Loss = L1 + ssim_weight * kornia SSIM loss (window ``ssim_window``).
+    val_view : (int, int) or None
+        Validation windows at this (width, height), e.g. (400, 250), the sweeps' frame, instead of the
+        square ``view``: the training crops stay small, while the best step is chosen on whole frames,
+        where the level of an image is set. ``None`` (the default): the square view.
     offset_weight : float
         Adds offset_weight * |mean(output) - mean(truth)| per crop (averaged over the batch): an error
         of the whole image's level, to which the SSIM term is blind and which the per-pixel L1
@@ -133,6 +137,7 @@ class WindowData:
     ssim_window: int = 11
     spike_only_fraction: float = 0.3
     offset_weight: float = 0.0
+    val_view: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -143,6 +148,14 @@ class WindowData:
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
+        if self.val_view is not None:
+            try:
+                vw, vh = (int(v) for v in self.val_view)
+            except (TypeError, ValueError):
+                raise InputError(f"val_view: expected (width, height), got {self.val_view!r}") from None
+            if vw < 16 or vh < 16:
+                raise InputError(f"val_view: expected at least 16x16 pixels, got {vw}x{vh}")
+            put(self, "val_view", (vw, vh))
         lo, hi = (float(v) for v in self.light_range)
         if not 0 < lo <= hi:
             raise InputError(f"light_range: expected 0 < low <= high, got {self.light_range}")
@@ -167,6 +180,8 @@ class WindowData:
                "motions": list(self.motions), "noise_levels": list(self.noise_levels), "photos": list(self.photos)}
         if self.speed_range != DEFAULT_SPEED_RANGE:  # shards made before the range was a field keep their key
             key["speed_range"] = list(self.speed_range)
+        if self.val_view is not None:  # likewise
+            key["val_view"] = list(self.val_view)
         return key
 
 

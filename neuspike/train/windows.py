@@ -58,17 +58,25 @@ BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
 SENSOR_SIZE = (400, 250)
 
 
-def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int) -> str:
+def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int,
+                  size: tuple[int, int]) -> str:
+    """A region of a training photograph resized to ``size`` (width, height), saved under ``source_dir``."""
     data: WindowData = spec.data
     name = data.photos[int(rng.integers(len(data.photos)))]
     luma = read_photo(name)
     h, w = luma.shape
+    vw, vh = size
     scale = max(SENSOR_SIZE[0] / w, SENSOR_SIZE[1] / h) * float(np.exp(rng.uniform(np.log(0.3), np.log(1.2))))
-    side = min(int(round(data.view / scale)), h, w)
-    y0, x0 = int(rng.integers(0, h - side + 1)), int(rng.integers(0, w - side + 1))
-    region = luma[y0:y0 + side, x0:x0 + side]
-    interp = cv2.INTER_AREA if side > data.view else cv2.INTER_LINEAR
-    region = np.clip(cv2.resize(region, (data.view, data.view), interpolation=interp), 0.0, 1.0).astype(np.float32)
+    if vw == vh:  # the square training view (the shards' original draw)
+        sw = sh = min(int(round(vw / scale)), h, w)
+    else:  # a full-size validation view: the same scale where the photograph allows, its aspect kept
+        sw, sh = int(round(vw / scale)), int(round(vh / scale))
+        shrink = min(1.0, w / sw, h / sh)
+        sw, sh = max(1, min(w, int(sw * shrink))), max(1, min(h, int(sh * shrink)))
+    y0, x0 = int(rng.integers(0, h - sh + 1)), int(rng.integers(0, w - sw + 1))
+    region = luma[y0:y0 + sh, x0:x0 + sw]
+    interp = cv2.INTER_AREA if sw > vw else cv2.INTER_LINEAR
+    region = np.clip(cv2.resize(region, (vw, vh), interpolation=interp), 0.0, 1.0).astype(np.float32)
     path = source_dir / f"{split}-{index:06d}-{name}.npy"
     if not path.exists():
         buf = io.BytesIO()
@@ -84,16 +92,17 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     rng = derive_rng(spec.seed, "train-cell", split, int(index))
     kinds = list(KIND_WEIGHTS)
     kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
-    size = (data.view, data.view)
+    # validation at the sweeps' frame when asked (whole-frame offsets show only there), else the square view
+    size = tuple(data.val_view) if split == "val" and data.val_view is not None else (data.view, data.view)
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
-    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * data.view / SENSOR_SIZE[0]
+    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * size[0] / SENSOR_SIZE[0]
     velocity = (speed * np.cos(angle), speed * np.sin(angle))
     if kind == "dead_leaves":
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
     else:
-        image = _photo_source(spec, rng, Path(source_dir), split, index)
-        focus = (float(rng.uniform(0.2, 0.8) * data.view), float(rng.uniform(0.2, 0.8) * data.view))
+        image = _photo_source(spec, rng, Path(source_dir), split, index, size)
+        focus = (float(rng.uniform(0.2, 0.8) * size[0]), float(rng.uniform(0.2, 0.8) * size[1]))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
         elif kind == "zoom":

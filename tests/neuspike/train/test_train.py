@@ -190,7 +190,8 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     assert float(with_term - base) == pytest.approx(3.0 * (0.05 + 0.02) / 2, rel=1e-5)
     texture = target + 0.1 * (torch.rand(2, 1, 24, 24, generator=gen) - 0.5)
     texture = texture - texture.mean(dim=(-2, -1), keepdim=True) + target.mean(dim=(-2, -1), keepdim=True)
-    assert float(tasks[3.0].loss(texture, target)[0] - tasks[0.0].loss(texture, target)[0]) == pytest.approx(0.0, abs=1e-6)
+    extra = tasks[3.0].loss(texture, target)[0] - tasks[0.0].loss(texture, target)[0]
+    assert float(extra) == pytest.approx(0.0, abs=1e-6)
     for bad in (-1.0, float("nan"), float("inf"), "1"):
         with pytest.raises(InputError, match="offset_weight"):
             WindowData(offset_weight=bad)
@@ -198,3 +199,45 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     earlier = TrainSpec(data=WindowData()).as_dict()  # a spec file written before the term existed
     del earlier["data"]["offset_weight"]
     assert spec_from_dict(earlier).data.offset_weight == 0.0
+
+
+def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
+    """``val_view`` makes only the validation windows WxH (the sweeps' frame); the training windows,
+    their draws and the key of a shard without it are what they were; a run validates on them."""
+    from dataclasses import replace
+
+    from neuspike.train.__main__ import build_parser, spec_from_args
+    from neuspike.train.loop import train
+    from neuspike.train.windows import draw_cell
+
+    square = WindowData(shard_dir=str(tmp_path / "square"), view=16, train_items=3, val_items=2, workers=1)
+    wide = replace(square, shard_dir=str(tmp_path / "wide"), val_view=(40, 24))
+    assert wide.key(0) == {**square.key(0), "val_view": [40, 24]} and "val_view" not in square.key(0)
+    a, b = TrainSpec(data=square, crop=16), TrainSpec(data=wide, crop=16)
+    for i in range(3):  # the training cells are drawn as before, the validation cells at the new size
+        sa, *rest_a = draw_cell(a, "train", i, tmp_path / "src-a")
+        sb, *rest_b = draw_cell(b, "train", i, tmp_path / "src-b")
+        assert rest_a == rest_b
+        if rest_a[2]["kind"] != "dead_leaves":  # the same region of the same photograph, saved in each run's folder
+            assert np.array_equal(np.load(sa.image), np.load(sb.image))
+            sb = replace(sb, image=sa.image)
+        assert sa == sb
+        assert draw_cell(b, "val", i, tmp_path / "src-b")[0].size == (40, 24)
+        assert draw_cell(a, "val", i, tmp_path / "src-a")[0].size == (16, 16)
+    spec = TrainSpec(data=wide, out_dir=str(tmp_path / "run"), steps=2, batch=2, crop=16, val_every=2,
+                     checkpoint_every=2, warmup=1, precision="float32", threads=1)
+    result = train(spec, quiet=True)
+    assert result["step"] == 2 and result["best"]["fusion"]["val_psnr"] > 0
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(lambda **kw: type("Bar", (), {"update": lambda *a: None, "close": lambda *a: None})())
+    trainer.task.load_validation()
+    assert tuple(trainer.task.val_batch[1].shape) == (2, 1, 24, 40)
+    assert load_spec(tmp_path / "run" / "spec.json").data.val_view == (40, 24)
+    args = build_parser().parse_args(["neuspike-net", "--val-view", "400x250", "--offset-weight", "2"])
+    parsed = spec_from_args(args)
+    assert parsed.data.val_view == (400, 250) and parsed.data.offset_weight == 2.0
+    with pytest.raises(InputError, match="--val-view: not for 'e2vid'"):
+        spec_from_args(build_parser().parse_args(["e2vid", "--val-view", "400x250"]))
+    for bad in ((8, 250), "400x250", (400,)):
+        with pytest.raises(InputError, match="val_view"):
+            replace(square, val_view=bad)
