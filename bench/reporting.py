@@ -294,8 +294,8 @@ def write_timing_tables(tables_dir: Path, timing: pd.DataFrame, metadata: dict[s
     threads = sorted({int(v) for v in timing["threads"].dropna()}) if "threads" in timing else []
     info = metadata.get("machine") or {}
     machine = info.get("cpu_model", "")
-    devices = {str(d) for d in timing.get("device", pd.Series(dtype=str)).dropna() if str(d).startswith("cuda")}
-    if devices and info.get("gpus"):  # the learned methods ran on a GPU: name it first
+    on_gpu = any(str(d).startswith("cuda") for d in timing.get("device", pd.Series(dtype=str)).dropna())
+    if on_gpu and info.get("gpus"):  # the learned methods ran on a GPU: name it first
         machine = f"{info['gpus'][0]} (learned methods) and {machine or 'an unnamed CPU'} (the others)"
     md = tb.timing_markdown(timing, threads=",".join(map(str, threads)) or None, machine=machine)
     written: list[Path] = []

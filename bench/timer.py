@@ -33,8 +33,8 @@ from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS, SensorConfig
 LIGHT, MOTION, PLANES = 0.25, 128, 256
 
 TIMING_COLUMNS = ("method", "family", "inputs", "resolution", "width", "height", "status", "error", "threads",
-                  "device", "precision", "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms", "q3_ms", "steps",
-                  "ms_per_frame", "min_frame_ms", "max_frame_ms", "gflop_per_step", "gflop_s", "flop_bound_ms",
+                  "device", "precision", "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms",
+                  "q3_ms", "steps", "ms_per_frame", "min_frame_ms", "max_frame_ms", "gflop_per_step", "gflop_s", "flop_bound_ms",
                   "matmul_gflop_s", "cold_ms", "stream_ms", "stream_min_ms", "stream_max_ms", "stream_steps")
 #: Output rate of the running video a streaming method is timed on (frames per second of sensor time).
 STREAM_FPS = 1000.0

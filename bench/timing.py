@@ -53,6 +53,7 @@ from typing import Iterable, Sequence
 
 from bench import grid as grids
 from neuspike.errors import InputError
+from neuspike.methods.precision import PRECISIONS
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 #: Default resolutions (width, height): the paper's Table 2.
@@ -114,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
                                           "the suite's own trained weights need no flag")
     parser.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
-    parser.add_argument("--precision", choices=("auto", "float32", "bfloat16"), default="auto",
+    parser.add_argument("--precision", choices=PRECISIONS, default="auto",
                         help="precision of the learned methods (default: auto, bfloat16 only where a measured step "
                         "is faster than float32 on this device); the row's precision column says what ran")
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
@@ -178,7 +179,8 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "device": args.device, "precision": args.precision, "weights": portable_path(weights) if weights is not None else None}}
+                         "device": args.device, "precision": args.precision,
+                         "weights": portable_path(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": command_line(), "executor": {"executor": "timing", "workers": 1},

@@ -50,11 +50,11 @@ from torch import nn
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample
+from neuspike.methods.precision import PRECISIONS
 from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
 
 __all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision", "synchronize"]
 
-PRECISIONS = ("auto", "float32", "bfloat16")
 #: Label of the default read-out: the module's output clamped to [0, 1].
 CLAMP = "clamp"
 

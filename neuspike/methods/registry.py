@@ -361,7 +361,7 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
     entries = [entry(name) for name in names]  # unknown names raise, listing the known ones
     check_device(device, entries)
     if precision is not None:
-        from neuspike.methods.learned import PRECISIONS
+        from neuspike.methods.precision import PRECISIONS
 
         if precision not in PRECISIONS:
             raise InputError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")

@@ -16,6 +16,8 @@ import json
 import sys
 from typing import Any, Sequence
 
+from neuspike.methods.precision import PRECISIONS
+
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
@@ -80,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "a GPU (a device this machine lacks is refused before anything is simulated or "
                                     "written). The data and their random draws stay on the CPU, so a seed gives the "
                                     "same data on any device; a run may resume on another device")
-    g.add_argument("--precision", choices=("auto", "float32", "bfloat16"),
+    g.add_argument("--precision", choices=PRECISIONS,
                    help="autocast precision (default auto: float32 unless the device computes bfloat16 natively and "
                         "a timed training step is at least 10%% faster in it; the choice is kept in the run "
                         "folder's precision.json; firenet-sim float32)")
