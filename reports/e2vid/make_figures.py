@@ -11,7 +11,8 @@ so its curve is drawn on a second axis with the scores of the published FireNet 
 on those sequences (``validation_view.csv``, ``python reports/e2vid/validation.py --view 400x250``).
 The third panel is the measure weights are chosen by since stage 3: the sweep harness on training
 photographs (``candidates/results.csv``, mean SSIM over its 16 cells) for stage 2's weights and the
-snapshots of stages 5 and 6 (both from stage 2's weights), with the published FireNet for orientation.
+snapshots of stages 5 and 6 (both from stage 2's weights) and of stage 7 (from stage 6's step 200), with
+the published FireNet for orientation.
 Writes training_curves.png.
 """
 
@@ -72,6 +73,10 @@ for prefix, label, color in (("e2vid-s5-", "stage 5 (16-window sequences, dead l
     names = sorted(m for m in harness.index if m.startswith(prefix))
     steps = [0] + [int(m[len(prefix):]) for m in names]
     axh.plot(steps, [harness["e2vid-stage2"]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
+s7 = sorted(m for m in harness.index if m.startswith("e2vid-s7-"))
+if s7:  # stage 7 starts from stage 6's step 200 (the weights shipped before it)
+    axh.plot([200] + [200 + int(m[len("e2vid-s7-"):]) for m in s7], [harness["e2vid-s6-00200"]] + [harness[m] for m in s7],
+             "-o", ms=4, color="C4", label="stage 7 (16-window linear sequences, from stage 6's 200)")
 axh.axhline(harness["firenet"], color="grey", ls=":", label="firenet (published)")
 axh.axhline(harness["e2vid-stage3"], color="C1", ls="--", label="stage 3 (not shipped)")
 axh.set_xlabel("optimiser steps after stage 2's weights")

@@ -10,7 +10,8 @@ import os
 
 from baselines.e2vid import E2VID
 
-CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400", "s6-00600")
+CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400", "s6-00600", "s7-00100", "s7-00200",
+              "s7-00300", "s7-00400", "s7-00500", "s7-00600")
 
 
 def register_methods(register):
