@@ -68,15 +68,14 @@ else:
     ax3.set_visible(False)
 harness = pd.read_csv(here / "candidates" / "results.csv")
 harness = harness[(harness.metric == "ssim") & (harness.status == "ok")].groupby("method")["value"].mean()
-for prefix, label, color in (("e2vid-s5-", "stage 5 (16-window sequences, dead leaves)", "C3"),
-                             ("e2vid-s6-", "stage 6 (linear radiance, clean x2; shipped at 200)", "C2")):
+# each stage's snapshots, drawn from the weights it started from (stage 7 from stage 6's step 200)
+for prefix, start, label, color in (
+        ("e2vid-s5-", ("e2vid-stage2", 0), "stage 5 (16-window sequences, dead leaves)", "C3"),
+        ("e2vid-s6-", ("e2vid-stage2", 0), "stage 6 (linear radiance, clean x2; shipped at 200)", "C2"),
+        ("e2vid-s7-", ("e2vid-s6-00200", 200), "stage 7 (16-window linear sequences, from stage 6's 200)", "C4")):
     names = sorted(m for m in harness.index if m.startswith(prefix))
-    steps = [0] + [int(m[len(prefix):]) for m in names]
-    axh.plot(steps, [harness["e2vid-stage2"]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
-s7 = sorted(m for m in harness.index if m.startswith("e2vid-s7-"))
-if s7:  # stage 7 starts from stage 6's step 200 (the weights shipped before it)
-    axh.plot([200] + [200 + int(m[len("e2vid-s7-"):]) for m in s7], [harness["e2vid-s6-00200"]] + [harness[m] for m in s7],
-             "-o", ms=4, color="C4", label="stage 7 (16-window linear sequences, from stage 6's 200)")
+    steps = [start[1]] + [start[1] + int(m[len(prefix):]) for m in names]
+    axh.plot(steps, [harness[start[0]]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
 axh.axhline(harness["firenet"], color="grey", ls=":", label="firenet (published)")
 axh.axhline(harness["e2vid-stage3"], color="C1", ls="--", label="stage 3 (not shipped)")
 axh.set_xlabel("optimiser steps after stage 2's weights")
