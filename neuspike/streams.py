@@ -49,6 +49,10 @@ class SpikeStream:
         ``None`` when unknown (real recordings).
     threshold : float or None
         The integrate-and-fire threshold, when known.
+    dark_rate : float or None
+        The sensor's dark level: spikes per plane that a pixel fires in total darkness, averaged
+        over the pixels (what a capped calibration measures; 0 for a simulated camera without dark
+        current). ``None`` when unknown (real recordings unless given).
     meta : dict
         Free-form provenance (stages that ran, source file, ...).
     """
@@ -58,6 +62,7 @@ class SpikeStream:
     start_s: float = 0.0
     gain: float | None = None
     threshold: float | None = None
+    dark_rate: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -80,6 +85,8 @@ class SpikeStream:
             object.__setattr__(self, "gain", check_positive("gain", self.gain))
         if self.threshold is not None:
             object.__setattr__(self, "threshold", check_positive("threshold", self.threshold))
+        if self.dark_rate is not None:
+            object.__setattr__(self, "dark_rate", check_nonnegative("dark_rate", self.dark_rate))
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -129,6 +136,7 @@ class SpikeStream:
             start_s=self.start_s + start / self.plane_rate_hz,
             gain=self.gain,
             threshold=self.threshold,
+            dark_rate=self.dark_rate,
             meta=dict(self.meta),
         )
 

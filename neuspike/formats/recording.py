@@ -205,6 +205,9 @@ class RecordingReader:
         ``"meta.json"``, ``"file"`` or ``"unknown"``).
     threshold, event_threshold : float or None
         Spike threshold and nominal contrast threshold, when known.
+    dark_rate : float or None
+        The spike sensor's dark rate (spikes per plane in darkness, mean over pixels), when known
+        (``meta.json``, else the ``.npz``).
     meta : dict or None
         The ``meta.json`` of a simulated recording folder.
     folder : Path
@@ -222,6 +225,7 @@ class RecordingReader:
     event_threshold: float | None
     meta: dict[str, Any] | None
     folder: Path
+    dark_rate: float | None = None
     spikes_path: Path | None = None
     events_path: Path | None = None
     raw_width: int | None = None
@@ -462,14 +466,14 @@ def open_recording(
     rate = rate_given if rate_given is not None else DEFAULT_PLANE_RATE_HZ
     start_s = start_given if start_given is not None else 0.0
     num_planes = 0
-    file_gain = file_threshold = None
+    file_gain = file_threshold = file_dark = None
     npz = None
     if sp is not None:
         npz, num_planes, rate, start_s = spike_file_extent(sp, height=height, width=width, raw_width=raw_width,
                                                            rate_given=rate_given, start_given=start_given)
         if npz is not None:
             height, width = npz.height, npz.width
-            file_gain, file_threshold = npz.gain, npz.threshold
+            file_gain, file_threshold, file_dark = npz.gain, npz.threshold, npz.dark_rate
     source = None
     if ev is not None:
         from neuspike.formats.event_ranges import open_event_source
@@ -491,10 +495,14 @@ def open_recording(
     else:
         used_gain, gain_source = None, "unknown"
     threshold = meta_float(meta, "threshold")
+    dark_rate = meta_float(meta, "dark_rate") if sp is not None else None
+    if dark_rate is not None and dark_rate < 0:
+        raise FormatError(f"meta.json: dark_rate must be a number >= 0, got {dark_rate!r}")
     return RecordingReader(
         height=int(height), width=int(width), plane_rate_hz=float(rate), start_s=float(start_s),  # type: ignore[arg-type]
         num_planes=num_planes, gain=used_gain, gain_source=gain_source,
         threshold=threshold if threshold is not None else file_threshold,
         event_threshold=meta_float(meta, "event_threshold"), meta=meta, folder=folder,
+        dark_rate=dark_rate if dark_rate is not None else file_dark,
         spikes_path=sp, events_path=ev, raw_width=raw_width, _spike_npz=npz, _events=source,
     )

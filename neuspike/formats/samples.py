@@ -294,7 +294,8 @@ def stream_samples(
             if planes is not None:
                 block = planes.get(w0, w1)
                 spikes = SpikeStream(block, plane_rate_hz=rate, start_s=w_start, gain=recording.gain,
-                                     threshold=recording.threshold, meta={"source": str(recording.spikes_path)})
+                                     threshold=recording.threshold, dark_rate=recording.dark_rate,
+                                     meta={"source": str(recording.spikes_path)})
         else:
             half = window_planes / rate / 2.0
             w_start, w_end = t - half, t + half

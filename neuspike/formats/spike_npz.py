@@ -3,7 +3,7 @@
 Two layouts are read:
 
 * this project's own (:func:`write_spike_npz`): ``planes`` bool (T, H, W) plus ``plane_rate_hz``,
-  ``start_s`` and, when known, ``gain`` and ``threshold`` (0-d float64 arrays) and ``meta_json``;
+  ``start_s`` and, when known, ``gain``, ``threshold`` and ``dark_rate`` (0-d float64 arrays) and ``meta_json``;
 * the Spike-Zoo / UHSR layout: ``spk`` uint8 (T, H, W) of 0 and 1, stored upright (row 0 at the
   top, no flip), no rate stored; other arrays (``label``, ...) are ignored.
 
@@ -155,6 +155,7 @@ def read_spike_npz(
         start_s = _scalar(archive, "start_s", p)
         gain = _scalar(archive, "gain", p)
         threshold = _scalar(archive, "threshold", p)
+        dark_rate = _scalar(archive, "dark_rate", p)
         meta: dict[str, Any] = {}
         if "meta_json" in names:
             meta = _meta_from(archive["meta_json"], p)
@@ -169,8 +170,8 @@ def read_spike_npz(
                  ("argument" if plane_rate_hz is not None else "default (Vidar)")})
     try:
         return SpikeStream(planes, plane_rate_hz=rate, start_s=start_s or 0.0, gain=gain, threshold=threshold,
-                           meta=meta)
-    except InputError as err:  # a stored rate, start, gain or threshold out of range
+                           dark_rate=dark_rate, meta=meta)
+    except InputError as err:  # a stored rate, start, gain, threshold or dark rate out of range
         raise FormatError(f"{p}: {err}") from None
 
 
@@ -188,8 +189,8 @@ def _json_default(value: Any) -> Any:
 def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
     """Write a :class:`SpikeStream` as a compressed ``.npz`` archive, atomically.
 
-    Stores ``planes`` (bool, upright), ``plane_rate_hz``, ``start_s``, ``gain`` and ``threshold``
-    (when not ``None``) and the stream's ``meta`` as ``meta_json``; :func:`read_spike_npz` reads
+    Stores ``planes`` (bool, upright), ``plane_rate_hz``, ``start_s``, ``gain``, ``threshold`` and
+    ``dark_rate`` (each when not ``None``) and the stream's ``meta`` as ``meta_json``; :func:`read_spike_npz` reads
     it back to an equal stream. The file is written to a temporary file in the same folder and
     renamed into place, so a failure leaves no partial file.
 
@@ -214,4 +215,6 @@ def write_spike_npz(path: str | os.PathLike, stream: SpikeStream) -> Path:
         arrays["gain"] = np.float64(stream.gain)
     if stream.threshold is not None:
         arrays["threshold"] = np.float64(stream.threshold)
+    if stream.dark_rate is not None:
+        arrays["dark_rate"] = np.float64(stream.dark_rate)
     return write_with(path, lambda f: np.savez_compressed(f, **arrays), parents=False)

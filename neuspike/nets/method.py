@@ -16,6 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -29,12 +30,34 @@ from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 from neuspike.nets.sliding import SlidingRepresentation
 
-__all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "NeuSpikeNetMethod"]
+__all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod", "count_level"]
 
 #: The parameters that define the module and its inputs (recorded in the weights card and checked).
 ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head")
 #: What an architecture parameter means when a weights card (written before it existed) lacks it.
 CARD_DEFAULTS = {"head": "tanh"}
+#: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
+#: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
+LEVELS = ("counts", "network")
+
+
+def count_level(sample: Sample) -> float | None:
+    """The mean radiance of the window's frame from its spike count, or None where it cannot be known.
+
+    A pixel of radiance ``x`` fires ``T (gain x + d) - 1/2`` spikes on average over ``T`` planes: ``d``
+    is the dark rate, and the charge left in the integrator at the window's end loses half a spike
+    on average, whether the pixel starts at rest or with a random charge. So
+    ``(mean rate + 1 / (2 T) - d) / gain``, over all the frame's pixels, estimates the frame's mean
+    radiance without bias, and with almost no variance at this many pixels. It needs the gain and
+    the dark rate (a simulation knows both; a real recording rarely does): None otherwise.
+    """
+    spikes = sample.spikes
+    gain, how = spike_gain(sample)
+    if spikes is None or how != "known" or spikes.dark_rate is None:
+        return None
+    planes = spikes.planes
+    rate = np.count_nonzero(planes) / planes.size
+    return float((rate + 0.5 / planes.shape[0] - spikes.dark_rate) / gain)
 
 
 def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
@@ -89,6 +112,12 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``"support"`` (a per-pixel choice among the spike representation's radiance estimates plus a
         correction, which keeps the absolute scale) or ``"support-count"`` (the same with the
         correction counted in spikes per group; the shipped weights).
+    level : str
+        ``"counts"`` (default): the image is shifted so that its mean equals the mean radiance
+        counted from the spikes (:func:`count_level`), where the sensor's gain and dark rate are
+        known, and left as the network made it otherwise; ``"network"``: never shifted. The shift
+        removes the offset that instance normalisation leaves to the network's guess: under a dark
+        current, which clean windows cannot be told apart from, up to several dB.
     **learned
         :class:`~neuspike.methods.learned.LearnedMethod`'s arguments (weights, device, precision).
     """
@@ -99,13 +128,15 @@ class NeuSpikeNetMethod(LearnedMethod):
 
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
-                 **learned: Any) -> None:
+                 level: str = "counts", **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head))
+        if level not in LEVELS:
+            raise InputError(f"level: expected one of {LEVELS}, got {level!r}")
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
-                         event_skip_weight=float(event_skip_weight), head=head, **learned)
+                         event_skip_weight=float(event_skip_weight), head=head, level=level, **learned)
 
     # -- LearnedMethod ----------------------------------------------------------------------------
 
@@ -166,8 +197,18 @@ class NeuSpikeNetMethod(LearnedMethod):
         if getattr(self, "_sliding", None) is not None and not getattr(self, "_streaming", False):
             self._sliding.reset()
 
+    def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:
+        """The clamped output, shifted to the counted mean level (``level="counts"``, where known)."""
+        image = super().to_image(output, sample)
+        self._level = count_level(sample) if self.params.get("level", "counts") == "counts" else None
+        if self._level is not None:
+            image = np.clip(image + np.float32(self._level - image.mean(dtype=np.float64)), 0.0, 1.0)
+        return image
+
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)
+        if getattr(self, "_level", None) is not None:
+            label = f"{label}; mean level {self._level:.4f} counted from the spikes (dark rate {sample.spikes.dark_rate:.4g})"
         if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label

@@ -586,6 +586,14 @@ class SpikeCamera:
         return self._light / self._threshold
 
     @property
+    def dark_rate(self) -> float:
+        """Spikes per plane a pixel fires in total darkness, averaged over the pixels (0 without dark
+        current): the dark level a capped calibration of this camera measures."""
+        if self._dark_charge is None:
+            return 0.0
+        return float(np.mean(self._dark_charge, dtype=np.float64)) / self._threshold
+
+    @property
     def backend(self) -> str:
         """The implementation in use, ``"numba"`` or ``"numpy"``."""
         return self._backend
@@ -627,8 +635,8 @@ class SpikeCamera:
         Returns
         -------
         SpikeStream
-            ``K * hold_planes`` planes with ``gain = light / threshold``, the threshold, the plane
-            rate and ``meta = {"stages": [...], "spike_count": int}``. Each stage entry is
+            ``K * hold_planes`` planes with ``gain = light / threshold``, the threshold, the dark
+            rate (:attr:`dark_rate`), the plane rate and ``meta = {"stages": [...], "spike_count": int}``. Each stage entry is
             ``{"name", "params", "seconds"}``; effect stages draw once, at construction, and their
             time is reported by the first capture (0.0 afterwards); ``integrate_and_fire`` is
             always listed, its time covering the plane loop (with the dark charge added in it).
@@ -645,6 +653,7 @@ class SpikeCamera:
             start_s=float(start_s),
             gain=self.gain,
             threshold=self._threshold,
+            dark_rate=self.dark_rate,
             meta={"stages": stages, "spike_count": int(np.count_nonzero(planes))},
         )
 

@@ -22,7 +22,7 @@ File format (``<key>.npz``, written atomically: a temporary file in the same fol
 ``meta_json``         the recording's metadata as UTF-8 JSON (uint8)
 ``spike_bits``        ``np.packbits(planes, axis=-1, bitorder="little")``, uint8 (T, H, ceil(W / 8))
 ``spike_shape``       int64 [T, H, W]
-``spike_json``        plane_rate_hz, start_s, gain, threshold and the stream's meta (JSON)
+``spike_json``        plane_rate_hz, start_s, gain, threshold, dark_rate and the stream's meta (JSON)
 ``event_t``, ``event_x``, ``event_y``, ``event_p``  the event arrays in the stream's dtypes
 ``event_json``        width, height and the stream's meta (JSON)
 ``static_spikes``, ``static_events``  bool (H, W): the static region each camera saw (optional)
@@ -53,7 +53,7 @@ from neuspike.scenes import SceneSpec
 from neuspike.simulation.recording import MODALITIES, SIMULATOR_VERSION, Recording, SensorConfig, check_modalities
 from neuspike.streams import EventStream, SpikeStream
 
-CACHE_FORMAT = "neuspike-recording-cache/1"
+CACHE_FORMAT = "neuspike-recording-cache/2"  # 2: the spike stream's dark rate is stored; files of 1 are simulated again
 #: Metadata of one modality only: kept from that modality's part when parts are joined.
 _MODALITY_META = {SPIKES: ("spike_count",), EVENTS: ("event_count", "event_count_window", "history_s")}
 
@@ -140,7 +140,7 @@ def save_recording(path: str | os.PathLike, recording: Recording) -> Path:
         arrays["spike_shape"] = np.array(s.planes.shape, dtype=np.int64)
         arrays["spike_json"] = _json_bytes({
             "plane_rate_hz": s.plane_rate_hz, "start_s": s.start_s, "gain": s.gain,
-            "threshold": s.threshold, "meta": s.meta,
+            "threshold": s.threshold, "dark_rate": s.dark_rate, "meta": s.meta,
         })
     if recording.events is not None:
         e = recording.events
@@ -185,7 +185,8 @@ def _recording_from(data: dict[str, np.ndarray], path: Path) -> Recording:
             raise FormatError(f"{path}: spike planes unpack to {planes.shape}, expected {(t, h, w)}")
         info = _from_json_bytes(data["spike_json"])
         spikes = SpikeStream(planes, plane_rate_hz=info["plane_rate_hz"], start_s=info["start_s"],
-                             gain=info["gain"], threshold=info["threshold"], meta=info["meta"])
+                             gain=info["gain"], threshold=info["threshold"], dark_rate=info.get("dark_rate"),
+                             meta=info["meta"])
     if "event_t" in data:
         info = _from_json_bytes(data["event_json"])
         events = EventStream(data["event_t"], data["event_x"], data["event_y"], data["event_p"],

@@ -89,6 +89,7 @@ def simulate_sequence(
     )
     if spike_cam is not None:
         meta["spike_count"] = n_spikes
+        meta["dark_rate"] = spike_cam.dark_rate
     if event_cam is not None:
         meta["event_count"] = n_events
     return meta

@@ -64,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grid", choices=("quick", "sweeps"), default="quick",
                    help="quick: 48 windows, L = 1/32, 1/8, 1/2 without and with high noise (the default); "
                    "sweeps: the full sweeps' 12 points over four scene kinds (192 windows)")
+    p.add_argument("--level", choices=("counts", "network"), default="counts",
+                   help="how the image's mean level is set (the method's `level`; default counts)")
     args = p.parse_args(argv)
     folders = args.folders or [None]
     torch.set_num_threads(2)
@@ -91,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         card = read_card(f"{folder}/neuspike-net.safetensors") if folder else None
         if card and "head" in card.get("model", {}).get("params", {}):
             head = {"head": card["model"]["params"]["head"]}
-        method = create("neuspike-net", weights_dir=folder, precision="float32", **head)
+        method = create("neuspike-net", weights_dir=folder, precision="float32", level=args.level, **head)
         raw, aligned = _score(method, samples)
         print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
               f"affine-aligned {np.mean(aligned):.2f}")

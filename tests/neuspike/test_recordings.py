@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from neuspike.errors import InputError, SourceError
+from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.formats.samples import DEFAULT_WINDOW_PLANES, EVENT_HISTORY_S, load_ground_truth, load_sample
 from neuspike.streams import EventStream
 from tests.shared_data import SHARED
@@ -65,7 +65,8 @@ def _simulated_folder(tmp_path: Path, *, t: int = 64, h: int = 12, w: int = 14, 
     folder = tmp_path / "sim"
     _write_spikes(folder / "spikes.npz", _indexed_planes(t, h, w))
     meta = {"width": w, "height": h, "plane_rate_hz": rate, "gain": 0.25, "threshold": 1.0,
-            "event_threshold": 0.2, "start_s": 0.0, "key_time_s": t / (2 * rate), "planes": t, "mode": "window"}
+            "event_threshold": 0.2, "start_s": 0.0, "key_time_s": t / (2 * rate), "planes": t, "mode": "window",
+            "dark_rate": 0.004}
     (folder / "meta.json").write_text(json.dumps(meta))
     np.save(folder / "gt.npy", np.linspace(0, 1.5, h * w, dtype=np.float32).reshape(h, w))
     return folder
@@ -120,7 +121,7 @@ def test_simulated_folder_uses_meta_json(tmp_path):
     folder = _simulated_folder(tmp_path)
     s = load_sample(spikes=folder / "spikes.npz")
     assert s.spikes.num_planes == 64 and _first_plane_index(s) == 0  # a window recording is used whole
-    assert s.spikes.gain == 0.25 and s.meta["gain_source"] == "meta.json"
+    assert s.spikes.gain == 0.25 and s.meta["gain_source"] == "meta.json" and s.spikes.dark_rate == 0.004
     assert s.key_time_s == pytest.approx(32 / 20_000.0) and s.key_plane == 32
     assert s.event_threshold == 0.2
     # gt.npy (not quantised) is preferred; HDR values above 1 are clipped, and noted
@@ -132,6 +133,10 @@ def test_simulated_folder_uses_meta_json(tmp_path):
     assert s.ground_truth is None and any("not used" in n for n in s.meta["notes"])
     with pytest.raises(InputError, match="meta.json states"):
         load_sample(spikes=folder / "spikes.npz", height=5, width=5)
+    meta = json.loads((folder / "meta.json").read_text())
+    (folder / "meta.json").write_text(json.dumps({**meta, "dark_rate": -0.001}))
+    with pytest.raises(FormatError, match="dark_rate"):
+        load_sample(spikes=folder / "spikes.npz")
 
 
 @needs_npz_reader

@@ -57,7 +57,7 @@ def _assert_same_streams(a, b):
     assert (a.spikes is None) == (b.spikes is None) and (a.events is None) == (b.events is None)
     if a.spikes is not None:
         np.testing.assert_array_equal(a.spikes.planes, b.spikes.planes)
-        assert a.spikes.gain == b.spikes.gain
+        assert a.spikes.gain == b.spikes.gain and a.spikes.dark_rate == b.spikes.dark_rate
     if a.events is not None:
         for name in ("t_s", "x", "y", "p"):
             np.testing.assert_array_equal(getattr(a.events, name), getattr(b.events, name))
@@ -126,6 +126,21 @@ def test_an_entry_of_the_earlier_layout_is_still_read(tmp_path, simulations):
     assert not simulated and simulations == []
     _assert_same_streams(served, rec)
     assert served.static_region() is None  # not kept then: the sweep renders it (bench.cells)
+
+
+def test_a_file_of_the_first_format_without_the_dark_rate_is_simulated_again(tmp_path, simulations):
+    cache = RecordingCache(tmp_path)
+    rec, _ = _get(cache, BOTH)
+    assert rec.spikes.dark_rate > 0  # the high noise level declares a dark current
+    for path in tmp_path.glob("*.npz"):  # rewrite every part as format 1 wrote it
+        with np.load(path) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays["format"] = np.frombuffer(b"neuspike-recording-cache/1", dtype=np.uint8)
+        np.savez(path, **arrays)
+    simulations.clear()
+    again, simulated = _get(RecordingCache(tmp_path), BOTH)
+    assert simulated == set(BOTH) and simulations == [BOTH]
+    _assert_same_streams(again, rec)
 
 
 # ----------------------------------------------------------------------------------------------

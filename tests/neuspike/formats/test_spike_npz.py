@@ -21,12 +21,13 @@ def _planes(t=6, h=5, w=7, seed=0):
 
 
 def test_round_trip_keeps_planes_and_sensor_fields(tmp_path):
-    stream = SpikeStream(_planes(), plane_rate_hz=40_000, start_s=0.25, gain=0.125, threshold=2.0,
+    stream = SpikeStream(_planes(), plane_rate_hz=40_000, start_s=0.25, gain=0.125, threshold=2.0, dark_rate=0.0055,
                          meta={"stages": [{"name": "integrate_and_fire", "seconds": np.float64(0.5)}]})
     path = write_spike_npz(tmp_path / "s.npz", stream)
     back = read_spike_npz(path)
     np.testing.assert_array_equal(back.planes, stream.planes)
-    assert (back.plane_rate_hz, back.start_s, back.gain, back.threshold) == (40_000, 0.25, 0.125, 2.0)
+    assert (back.plane_rate_hz, back.start_s, back.gain, back.threshold, back.dark_rate) == (40_000, 0.25, 0.125, 2.0,
+                                                                                             0.0055)
     assert back.meta["stages"] == [{"name": "integrate_and_fire", "seconds": 0.5}]
     assert os.listdir(tmp_path) == ["s.npz"]
 
@@ -34,7 +35,7 @@ def test_round_trip_keeps_planes_and_sensor_fields(tmp_path):
 def test_unknown_gain_stays_unknown(tmp_path):
     write_spike_npz(tmp_path / "s.npz", SpikeStream(_planes()))
     back = read_spike_npz(tmp_path / "s.npz")
-    assert back.gain is None and back.threshold is None and back.plane_rate_hz == 20_000
+    assert back.gain is None and back.threshold is None and back.dark_rate is None and back.plane_rate_hz == 20_000
 
 
 def test_spk_layout_is_read_upright(tmp_path):

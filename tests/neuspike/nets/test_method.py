@@ -7,6 +7,7 @@ import torch
 from neuspike.errors import FormatError, InputError
 from neuspike.methods import create, entry
 from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod, event_representation, spike_representation
+from neuspike.nets.method import count_level
 from neuspike.nets.representations import interval_rate, spike_quantum
 from neuspike.sample import Sample
 from neuspike.streams import EventStream, SpikeStream
@@ -129,6 +130,37 @@ def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_
     spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
     spike.reconstruct(make_sample(gain=None))
     assert "gain estimated" in spike.last_normalisation
+
+
+def test_the_counted_level_is_the_radiance_of_a_regular_train():
+    """A pixel firing every p planes over T planes holds T / p spikes: radiance (1 / p) / gain; the
+    half spike left in the integrator and the dark rate are accounted for."""
+    sample = make_sample(gain=0.25, period=4)
+    assert count_level(sample) is None  # dark rate unknown
+    spikes = sample.spikes
+    known = Sample(**{**sample.__dict__, "spikes": SpikeStream(spikes.planes, gain=0.25, dark_rate=0.0)})
+    assert count_level(known) == pytest.approx((1 / 4 + 0.5 / T) / 0.25)
+    dark = Sample(**{**sample.__dict__, "spikes": SpikeStream(spikes.planes, gain=0.25, dark_rate=1 / 180)})
+    assert count_level(dark) == pytest.approx((1 / 4 + 0.5 / T - 1 / 180) / 0.25)
+    unknown_gain = Sample(**{**sample.__dict__, "spikes": SpikeStream(spikes.planes, dark_rate=0.0)})
+    assert count_level(unknown_gain) is None
+
+
+def test_counts_level_shifts_the_image_to_the_counted_mean(weights_dir, one_torch_thread):
+    base = make_sample(gain=0.5, period=4)
+    sample = Sample(**{**base.__dict__, "spikes": SpikeStream(base.spikes.planes, gain=0.5, dark_rate=0.0)})
+    level = count_level(sample)  # 0.504: well inside (0, 1), so no pixel is clipped by a shift
+    network = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32", level="network")
+    counts = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
+    as_made, shifted = network.reconstruct(sample), counts.reconstruct(sample)
+    assert float(shifted.mean()) == pytest.approx(level, abs=1e-3) or shifted.min() == 0.0 or shifted.max() == 1.0
+    inside = (shifted > 0) & (shifted < 1)
+    np.testing.assert_allclose((shifted - as_made)[inside], level - float(as_made.mean()), atol=1e-5)
+    assert "counted from the spikes" in counts.last_normalisation and network.last_normalisation == "clamp"
+    # without the dark rate the image is the network's own
+    np.testing.assert_array_equal(counts.reconstruct(base), network.reconstruct(base))
+    with pytest.raises(InputError, match="level"):
+        create("neuspike-net-spike", weights_dir=weights_dir, level="mean")
 
 
 def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):

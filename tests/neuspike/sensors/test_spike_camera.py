@@ -239,6 +239,21 @@ def test_dark_current_isis_match_the_declared_pattern_and_distribution():
     assert abs(measured.std() - 50.0) < 5 * 50.0 / math.sqrt(2 * n)
 
 
+def test_dark_rate_is_the_rate_fired_in_darkness_and_zero_without_dark_current():
+    h, w, t = 30, 40, 6000
+    cam = SpikeCamera(w, h, light=0.25, threshold=0.5, effects=BOTH, rng=np.random.default_rng(3))
+    assert cam.dark_rate == pytest.approx(np.mean(1.0 / (0.5 / cam.dark_charge.astype(np.float64))), rel=1e-6)
+    stream = cam.capture(np.zeros((1, h, w), np.float32), hold_planes=t)
+    assert stream.dark_rate == cam.dark_rate
+    # conservation of charge in darkness: each pixel fires t * dark / threshold spikes, give or take
+    # the one its starting charge (in [-3, 3] thresholds for all but a few pixels) adds or removes
+    fired = stream.planes.sum(dtype=np.int64) / (t * h * w)
+    assert abs(fired - cam.dark_rate) < 3.5 / t
+    assert 1 / 230 < cam.dark_rate < 1 / 140  # the declared Normal(180, 50^2) isi, with its spread
+    clean = SpikeCamera(w, h, light=0.25, threshold=0.5, rng=None)
+    assert clean.dark_rate == 0.0 and clean.capture(np.zeros((1, h, w), np.float32), hold_planes=4).dark_rate == 0.0
+
+
 def test_dark_charge_redraws_only_isis_below_one_plane():
     shape, mean, std = (200, 200), 2.0, 5.0
     dark = draw_dark_charge(shape, threshold=1.0, isi_mean_planes=mean, isi_std_planes=std,
