@@ -39,6 +39,8 @@ CARD_DEFAULTS = {"head": "tanh"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
 #: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
+#: The read-out label of an image whose mean level was counted from the spikes.
+COUNTED = "mean level counted from the spikes"
 
 
 def count_level(sample: Sample) -> float | None:
@@ -208,7 +210,7 @@ class NeuSpikeNetMethod(LearnedMethod):
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)
         if getattr(self, "_level", None) is not None:
-            label = f"{label}; mean level {self._level:.4f} counted from the spikes (dark rate {sample.spikes.dark_rate:.4g})"
+            label = f"{label}; {COUNTED}"
         if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label

@@ -156,7 +156,8 @@ def test_counts_level_shifts_the_image_to_the_counted_mean(weights_dir, one_torc
     assert float(shifted.mean()) == pytest.approx(level, abs=1e-3) or shifted.min() == 0.0 or shifted.max() == 1.0
     inside = (shifted > 0) & (shifted < 1)
     np.testing.assert_allclose((shifted - as_made)[inside], level - float(as_made.mean()), atol=1e-5)
-    assert "counted from the spikes" in counts.last_normalisation and network.last_normalisation == "clamp"
+    assert counts.last_normalisation == "clamp; mean level counted from the spikes"
+    assert network.last_normalisation == "clamp"
     # without the dark rate the image is the network's own
     np.testing.assert_array_equal(counts.reconstruct(base), network.reconstruct(base))
     with pytest.raises(InputError, match="level"):
