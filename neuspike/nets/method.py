@@ -54,8 +54,10 @@ def count_level(sample: Sample) -> float | None:
     the dark rate (a simulation knows both; a real recording rarely does): None otherwise.
     """
     spikes = sample.spikes
+    if spikes is None or spikes.dark_rate is None:
+        return None
     gain, how = spike_gain(sample)
-    if spikes is None or how != "known" or spikes.dark_rate is None:
+    if how != "known":
         return None
     planes = spikes.planes
     rate = np.count_nonzero(planes) / planes.size
