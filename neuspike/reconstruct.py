@@ -49,6 +49,7 @@ class ReconstructSpec:
     plane: int | None = None
     at_s: float | None = None
     gain: float | None = None
+    dark_rate: float | None = None
     window_planes: int | None = None
     weights: Path | None = None
     gt: Path | None = None
@@ -124,6 +125,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gain", type=float, metavar="G",
                    help="spikes per plane per unit radiance; overrides the recording's (real data: unknown, "
                         "so methods normalise robustly and say so)")
+    p.add_argument("--dark-rate", type=float, metavar="D",
+                   help="the spike sensor's dark rate: spikes per plane a pixel fires in darkness, mean over "
+                        "pixels (from a capped calibration); overrides the recording's. With the gain it lets "
+                        "neuspike-net set its image's mean level from the spike count")
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: a simulated window's own length, else 256)")
     p.add_argument("--weights", type=Path, metavar="DIR",
@@ -235,7 +240,7 @@ def run(spec: ReconstructSpec, stream: TextIO | None = None) -> list[MethodResul
     methods = _prepare_methods(spec)
     sample = load_sample(
         spikes=spec.spikes, events=spec.events, height=spec.height, width=spec.width, plane=spec.plane,
-        at_s=spec.at_s, gain=spec.gain, window_planes=spec.window_planes, gt=spec.gt,
+        at_s=spec.at_s, gain=spec.gain, dark_rate=spec.dark_rate, window_planes=spec.window_planes, gt=spec.gt,
         raw_width=spec.raw_width, plane_rate_hz=spec.plane_rate_hz,
     )
     print(f"sample: {describe_sample(sample)}", file=stream)
@@ -276,7 +281,7 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
     return ReconstructSpec(
         methods=_split_methods(args.method), out=args.out, spikes=args.spikes, events=args.events,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
-        plane=args.plane, at_s=args.at_s, gain=args.gain, window_planes=args.window_planes,
+        plane=args.plane, at_s=args.at_s, gain=args.gain, dark_rate=args.dark_rate, window_planes=args.window_planes,
         weights=weights_dir_from_env(args.weights), gt=args.gt, device=args.device,
     )
 

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.utils.checks import check_int, check_positive, check_positive_int
+from neuspike.utils.checks import check_int, check_nonnegative, check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError, SourceError
 from neuspike.streams import VIDAR_PLANE_RATE_HZ, EventStream, SpikeStream
 
@@ -402,6 +402,7 @@ def open_recording(
     raw_width: int | None = None,
     plane_rate_hz: float | None = None,
     gain: float | None = None,
+    dark_rate: float | None = None,
 ) -> RecordingReader:
     """Open a recording (metadata only; data is read later, by range), by the rules of the module docstring.
 
@@ -420,6 +421,9 @@ def open_recording(
         Planes per second; overrides ``meta.json`` and the file; default :data:`DEFAULT_PLANE_RATE_HZ`.
     gain : float or None
         Expected spikes per plane per unit radiance; overrides the recording's.
+    dark_rate : float or None
+        The spike sensor's dark rate (spikes per plane in darkness, mean over pixels, from a capped
+        calibration); overrides the recording's.
 
     Returns
     -------
@@ -456,6 +460,10 @@ def open_recording(
         gain = check_positive("gain", gain)
         if sp is None:
             raise InputError("a gain applies to spike recordings; no spike file was given")
+    if dark_rate is not None:
+        dark_rate = check_nonnegative("dark_rate", dark_rate)
+        if sp is None:
+            raise InputError("a dark rate applies to spike recordings; no spike file was given")
 
     folder = (sp or ev).parent  # type: ignore[union-attr]
     meta = read_meta(folder)
@@ -495,14 +503,16 @@ def open_recording(
     else:
         used_gain, gain_source = None, "unknown"
     threshold = meta_float(meta, "threshold")
-    dark_rate = meta_float(meta, "dark_rate") if sp is not None else None
-    if dark_rate is not None and dark_rate < 0:
-        raise FormatError(f"meta.json: dark_rate must be a number >= 0, got {dark_rate!r}")
+    meta_dark = meta_float(meta, "dark_rate") if sp is not None else None
+    if meta_dark is not None and meta_dark < 0:
+        raise FormatError(f"meta.json: dark_rate must be a number >= 0, got {meta_dark!r}")
+    if dark_rate is None:
+        dark_rate = meta_dark if meta_dark is not None else file_dark
     return RecordingReader(
         height=int(height), width=int(width), plane_rate_hz=float(rate), start_s=float(start_s),  # type: ignore[arg-type]
         num_planes=num_planes, gain=used_gain, gain_source=gain_source,
         threshold=threshold if threshold is not None else file_threshold,
         event_threshold=meta_float(meta, "event_threshold"), meta=meta, folder=folder,
-        dark_rate=dark_rate if dark_rate is not None else file_dark,
+        dark_rate=dark_rate,
         spikes_path=sp, events_path=ev, raw_width=raw_width, _spike_npz=npz, _events=source,
     )

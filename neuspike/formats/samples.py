@@ -320,6 +320,7 @@ def load_sample(
     gt: str | os.PathLike | None = None,
     raw_width: int | None = None,
     plane_rate_hz: float | None = None,
+    dark_rate: float | None = None,
 ) -> Sample:
     """Load one sample of a recording: the cut of :func:`stream_samples` at the key instant.
 
@@ -329,7 +330,7 @@ def load_sample(
         Vidar ``.dat`` (needs ``height``/``width`` or a ``meta.json`` beside it) or ``.npz``.
     events : path or None
         An event file.
-    height, width, raw_width, plane_rate_hz, gain
+    height, width, raw_width, plane_rate_hz, gain, dark_rate
         As for :func:`~neuspike.formats.recording.open_recording`.
     plane : int or None
         Key plane index into the spike file (the key instant is the plane's centre).
@@ -360,7 +361,7 @@ def load_sample(
     if window_planes is not None:
         window_planes = check_positive_int("window_planes", window_planes)
     with open_recording(spikes=spikes, events=events, height=height, width=width, raw_width=raw_width,
-                        plane_rate_hz=plane_rate_hz, gain=gain) as rec:
+                        plane_rate_hz=plane_rate_hz, gain=gain, dark_rate=dark_rate) as rec:
         key_time_s = rec.key_instant(plane=plane, at_s=at_s)
         sample = next(stream_samples(rec, [key_time_s], window_planes=window_planes))
         info: dict[str, Any] = {
@@ -370,7 +371,7 @@ def load_sample(
         }
         if rec.spikes_path is not None:
             info.update({k: sample.meta[k] for k in ("file_planes", "window_planes_in_file", "key_plane_in_file")})
-            info.update(gain=rec.gain, gain_source=rec.gain_source)
+            info.update(gain=rec.gain, gain_source=rec.gain_source, dark_rate=rec.dark_rate)
         if rec.events_path is not None:
             info.update({
                 "event_history_s": EVENT_HISTORY_S,
@@ -432,6 +433,7 @@ def describe_sample(sample: Sample) -> str:
             f"{sample.spikes.num_planes} spike planes ({w0}..{w1 - 1} of {sample.meta.get('file_planes', '?')}), "
             f"key plane {sample.meta.get('key_plane_in_file', sample.key_plane)}, "
             + ("gain unknown" if gain is None else f"gain {gain:g} ({sample.meta.get('gain_source', '?')})")
+            + ("" if sample.spikes.dark_rate is None else f", dark rate {sample.spikes.dark_rate:.4g}")
         )
     if sample.events is not None:
         n_win = len(sample.window_events())

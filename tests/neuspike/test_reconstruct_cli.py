@@ -215,3 +215,19 @@ def test_bad_size_and_bad_gt_exit_2(dummies, npz_recording, tmp_path, capsys):
     rc = main(["--method", SPIKES_NAME, "--spikes", str(path), "--gt", str(small), "--out", str(tmp_path / "o")])
     assert rc == 2 and "ground truth" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@needs_npz_reader
+def test_gain_and_dark_rate_given_reach_the_sample_and_a_bad_dark_rate_exits_2(dummies, npz_recording, tmp_path,
+                                                                                 capsys, monkeypatch):
+    path, _, _ = npz_recording
+    seen = []
+    monkeypatch.setattr(RateMethod, "_reconstruct", lambda self, sample: (
+        seen.append((sample.spikes.gain, sample.spikes.dark_rate)) or np.zeros((24, 32), np.float32), "none"))
+    assert main(["--method", SPIKES_NAME, "--spikes", str(path), "--out", str(tmp_path / "o")]) == 0
+    assert main(["--method", SPIKES_NAME, "--spikes", str(path), "--gain", "0.5", "--dark-rate", "0.0055",
+                 "--out", str(tmp_path / "o")]) == 0
+    assert seen == [(None, None), (0.5, 0.0055)]  # unknown unless given (the file stores neither)
+    assert "dark rate 0.0055" in capsys.readouterr().out
+    rc = main(["--method", SPIKES_NAME, "--spikes", str(path), "--dark-rate", "-1", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "dark_rate" in capsys.readouterr().err
