@@ -76,6 +76,7 @@ class VideoSpec:
     raw_width: int | None = None
     plane_rate_hz: float | None = None
     gain: float | None = None
+    dark_rate: float | None = None
     weights: Path | None = None
     device: str = "cpu"
     progress: bool = True
@@ -130,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--raw-width", type=int, metavar="W", help="stored width of a .dat with extra columns (e.g. 416)")
     p.add_argument("--plane-rate", type=float, metavar="HZ", help="spike planes per second (default: meta.json's, else 20000)")
     p.add_argument("--gain", type=float, metavar="G", help="spikes per plane per unit radiance (default: the recording's)")
+    p.add_argument("--dark-rate", type=float, metavar="D",
+                   help="spikes per plane a pixel fires in darkness, mean over pixels (a capped calibration; "
+                        "default: the recording's)")
     p.add_argument("--weights", type=Path, metavar="DIR", help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
     p.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
@@ -166,7 +170,7 @@ def spec_from_args(args: argparse.Namespace) -> VideoSpec:
         sheet_frames=args.sheet_frames, sheet_width=args.sheet_width, window_planes=args.window_planes,
         event_history_s=args.event_history,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
-        gain=args.gain, weights=weights_dir_from_env(args.weights), device=args.device,
+        gain=args.gain, dark_rate=args.dark_rate, weights=weights_dir_from_env(args.weights), device=args.device,
         progress=not args.no_progress,
     )
 
@@ -265,7 +269,7 @@ def run(spec: VideoSpec, stream: Any = None) -> dict[str, Any]:
     _history(spec)
     with open_recording(spec.recording, spikes=spec.spikes, events=spec.events, height=spec.height,
                         width=spec.width, raw_width=spec.raw_width, plane_rate_hz=spec.plane_rate_hz,
-                        gain=spec.gain) as rec:
+                        gain=spec.gain, dark_rate=spec.dark_rate) as rec:
         methods = _create_methods(spec, rec.modalities)
         inputs = set().union(*(m.inputs for m in methods))
         fps = check_fps(spec.fps, rec, inputs)
@@ -450,7 +454,7 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
         "spec": {k: (portable_path(v) if isinstance(v, Path) else v) for k, v in asdict(spec).items()},
         "recording": {"width": w, "height": h, "modalities": sorted(rec.modalities),
                       "plane_rate_hz": rec.plane_rate_hz, "span_s": list(rec.span_s()), "gain": rec.gain,
-                      "gain_source": rec.gain_source,
+                      "gain_source": rec.gain_source, "dark_rate": rec.dark_rate,
                       "folder": portable_path(rec.folder) if rec.folder is not None else None},
         "frames": n, "fps": fps, "start_s": start, "end_s": end,
         "ground_truth": truth.source if truth is not None else None,

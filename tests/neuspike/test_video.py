@@ -220,6 +220,7 @@ def test_command_writes_videos_frames_and_metrics(tmp_path, rng):
     assert not list(out.glob(".*partial*"))
     summary = json.loads((out / "video.json").read_text())
     assert summary["frames"] == 20 and summary["ground_truth"] == "scene"
+    assert summary["recording"]["dark_rate"] == 0.0  # written by the simulation: a camera without dark current
     # the record names no absolute folder of this machine (the command got absolute paths)
     assert str(tmp_path) not in (out / "video.json").read_text()
     cap = cv2.VideoCapture(str(out / "compare.mp4"))
