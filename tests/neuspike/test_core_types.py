@@ -78,12 +78,16 @@ def test_condition_effects_merge_later_declarations_over_the_noise_level():
 def test_spike_stream_validates_and_cuts_windows():
     planes = np.zeros((10, 3, 4), bool)
     planes[4, 1, 2] = True
-    s = SpikeStream(planes, plane_rate_hz=1000.0, start_s=0.5)
+    s = SpikeStream(planes, plane_rate_hz=1000.0, start_s=0.5, gain=0.25, dark_rate=0.005)
     w = s.window(3, 6)
     assert w.num_planes == 3 and w.start_s == pytest.approx(0.503) and w.planes[1, 1, 2]
+    assert (w.gain, w.dark_rate) == (0.25, 0.005)  # sensor fields travel with a window
     for bad in (np.full((2, 3, 4), 2, np.uint8), np.zeros((3, 4), bool)):
         with pytest.raises(InputError):
             SpikeStream(bad)
+    for dark in (-0.001, float("nan")):
+        with pytest.raises(InputError, match="dark_rate"):
+            SpikeStream(planes, dark_rate=dark)
 
 
 def test_event_stream_validates_order_bounds_and_polarity():
