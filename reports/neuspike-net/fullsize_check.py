@@ -1,14 +1,14 @@
 """Full-size validation on *training* photographs: raw and affine-aligned PSNR of NeuSpike-Net weights.
 
     python reports/neuspike-net/fullsize_check.py [WEIGHTS_DIR ...] [--references snm,tfi] [--grid sweeps]
-        [--level counts|network]
+        [--level counts|network] [--method neuspike-net|neuspike-net-spike]
 
 The training validation windows are 128x128, but the sweeps reconstruct 400x250 frames. There the
 instance-normalised features see other statistics, and the correction channel of the support
 head can shift a whole image. This check simulates 400x250 pans and stills of four training
 photographs (astronaut, brick, coffee, rocket) at L = 1/32, 1/8, 1/2, without noise and at the high
-noise level, seed 0, and prints the mean PSNR and affine-aligned PSNR of `neuspike-net` for each
-weights folder (default: the shipped weights), with the head its card names. It decides between
+noise level, seed 0, and prints the mean PSNR, affine-aligned PSNR and SSIM of `neuspike-net` (or, with
+``--method neuspike-net-spike``, of the spike-only variant) for each weights folder (default: the shipped weights), with the head its card names. It decides between
 candidate weights without touching the test photographs.
 
 ``--grid sweeps`` replaces that small grid by the full sweeps' own points on the same four training
@@ -35,6 +35,7 @@ from bench import grid as grids
 from neuspike.conditions import Condition
 from neuspike.methods import create
 from neuspike.methods.weights import read_card
+from neuspike.metrics import ssim
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
@@ -51,9 +52,10 @@ def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
     return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 
 
-def _score(method, samples) -> tuple[list[float], list[float], list[float]]:
-    """Raw PSNR, affine-aligned PSNR and the error of the mean level (image mean - truth mean)."""
-    raw, aligned, level = [], [], []
+def _score(method, samples) -> tuple[list[float], list[float], list[float], list[float]]:
+    """Raw PSNR, affine-aligned PSNR, the error of the mean level (image mean - truth mean) and raw
+    SSIM (the sweeps' own, :func:`neuspike.metrics.ssim`)."""
+    raw, aligned, level, structure = [], [], [], []
     for sample in samples:
         y, truth = method.reconstruct(sample), sample.ground_truth
         design = np.stack([y.ravel(), np.ones(y.size)], 1)
@@ -61,7 +63,8 @@ def _score(method, samples) -> tuple[list[float], list[float], list[float]]:
         raw.append(_psnr(y, truth))
         aligned.append(_psnr(np.clip(a * y + b, 0, 1), truth))
         level.append(float(y.mean(dtype=np.float64) - truth.mean(dtype=np.float64)))
-    return raw, aligned, level
+        structure.append(ssim(y, truth, data_range=1.0))
+    return raw, aligned, level, structure
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -71,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grid", choices=("quick", "sweeps"), default="quick",
                    help="quick: 48 windows, L = 1/32, 1/8, 1/2 without and with high noise (the default); "
                    "sweeps: the full sweeps' 12 points over four scene kinds (192 windows)")
+    p.add_argument("--method", choices=("neuspike-net", "neuspike-net-spike"), default="neuspike-net",
+                   help="which variant's weights file each folder is read for (default neuspike-net)")
     p.add_argument("--level", choices=("counts", "network"), default="counts",
                    help="how the image's mean level is set (the method's `level`; default counts)")
     args = p.parse_args(argv)
@@ -90,33 +95,38 @@ def main(argv: list[str] | None = None) -> int:
         samples.append(simulate_sample(scene.spec, cond, sensor=SensorConfig(), seed=0, modalities=("spikes", "events")))
     groups = {key: [i for i, k in enumerate(keys) if k == key] for key in dict.fromkeys(keys)}
     best_ref = {key: -np.inf for key in groups}
+    best_ssim = {key: -np.inf for key in groups}
     for name in filter(None, args.references.split(",")):
-        raw, _, _ = _score(create(name), samples)
-        print(f"{name}: PSNR {np.mean(raw):.2f}")
+        raw, _, _, structure = _score(create(name), samples)
+        print(f"{name}: PSNR {np.mean(raw):.2f}, SSIM {np.mean(structure):.4f}")
         for key, pick in groups.items():
             best_ref[key] = max(best_ref[key], float(np.mean([raw[i] for i in pick])))
+            best_ssim[key] = max(best_ssim[key], float(np.mean([structure[i] for i in pick])))
     for folder in folders:
         head = {}  # the head the weights were trained with (their card), so any candidate loads
-        card = read_card(f"{folder}/neuspike-net.safetensors") if folder else None
+        card = read_card(f"{folder}/{args.method}.safetensors") if folder else None
         if card and "head" in card.get("model", {}).get("params", {}):
             head = {"head": card["model"]["params"]["head"]}
-        method = create("neuspike-net", weights_dir=folder, precision="float32", level=args.level, **head)
-        raw, aligned, level = _score(method, samples)
+        method = create(args.method, weights_dir=folder, precision="float32", level=args.level, **head)
+        raw, aligned, level, structure = _score(method, samples)
         print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
-              f"affine-aligned {np.mean(aligned):.2f}")
-        margins, gaps = [], []
+              f"affine-aligned {np.mean(aligned):.2f}, SSIM {np.mean(structure):.4f}")
+        margins, gaps, ssim_margins = [], [], []
         for key, pick in groups.items():  # each point: raw / aligned, margin to the references
             r, a = float(np.mean([raw[i] for i in pick])), float(np.mean([aligned[i] for i in pick]))
+            q = float(np.mean([structure[i] for i in pick]))
             lo, hi = min(level[i] for i in pick), max(level[i] for i in pick)
             gaps.append(a - r)
             margin = ""
             if np.isfinite(best_ref[key]):
                 margins.append(r - best_ref[key])
-                margin = f", {r - best_ref[key]:+.2f} dB over the best reference"
+                ssim_margins.append(q - best_ssim[key])
+                margin = f", {r - best_ref[key]:+.2f} dB / {q - best_ssim[key]:+.4f} SSIM over the best reference"
             label = key if isinstance(key, str) else f"L = 1/{round(1 / key[0])}, noise {key[1]}"
-            print(f"    {label}: {r:.2f} / {a:.2f}{margin}; mean level error {lo:+.4f} to {hi:+.4f}")
+            print(f"    {label}: {r:.2f} / {a:.2f}, SSIM {q:.4f}{margin}; mean level error {lo:+.4f} to {hi:+.4f}")
         if margins:
-            print(f"    worst margin {min(margins):+.2f} dB; largest aligned - raw gap {max(gaps):.2f} dB")
+            print(f"    worst margin {min(margins):+.2f} dB, {min(ssim_margins):+.4f} SSIM; "
+                  f"largest aligned - raw gap {max(gaps):.2f} dB")
     return 0
 
 
