@@ -16,7 +16,10 @@ Outputs in ``--out``, beside the sweep's (results.csv, config.json, metadata.jso
                      that falls on each of the 16 time bins of the spike representation (its rate
                      and interval channels of a bin together), on the first test photograph, seed 0,
                      and its width in planes (the participation ratio of the shares times the bin
-                     length)
+                     length); over the whole image (``support_planes``, ``bin00`` ...), where flat
+                     regions that motion does not blur dominate, and over the output's edge pixels
+                     only (``edge_support_planes``, ``edge_bin00`` ...: the pixels whose ground-truth
+                     gradient magnitude is in its top :data:`EDGE_FRACTION`, all of which move in a pan)
 
 Options, resuming and exit status are those of :mod:`bench.sweep` (whose ``--lights``, ``--motions``,
 ``--scenes`` and ``--size`` override this test's defaults).
@@ -136,6 +139,16 @@ def summarise(out: Path) -> dict[str, Any]:
             g = g.sort_values("speed")
             lines.append(f"| `{m}` | {_fraction(light)} | " + " | ".join(f"{w:.0f}" for w in g["support_planes"]) + " |")
         lines.append("")
+        if "edge_support_planes" in sup:
+            lines += [f"On the edge pixels only (the top {EDGE_FRACTION:.0%} of the ground truth's gradient "
+                      "magnitude, all moving):", "",
+                      "| method | L | " + " | ".join(f"{s:g}x" for s in sorted(sup["speed"].unique())) + " |",
+                      "|---|---|" + "---:|" * sup["speed"].nunique()]
+            for (m, light), g in sup.groupby(["method", "light"], sort=False):
+                g = g.sort_values("speed")
+                lines.append(f"| `{m}` | {_fraction(light)} | "
+                             + " | ".join(f"{w:.0f}" for w in g["edge_support_planes"]) + " |")
+            lines.append("")
     write_text(out / "fast_motion.md", "\n".join(lines))
     return {"means": means}
 
@@ -147,10 +160,39 @@ def _fraction(x: float) -> str:
     return str(f) if abs(float(f) - x) < 1e-9 else f"{x:g}"
 
 
+#: The share of pixels, by ground-truth gradient magnitude, over which the edge support is measured.
+EDGE_FRACTION = 0.1
+
+
+def edge_mask(truth, fraction: float = EDGE_FRACTION):
+    """Boolean (H, W): the pixels whose gradient magnitude in ``truth`` is in its top ``fraction``
+    (at least one pixel)."""
+    import numpy as np
+
+    gy, gx = np.gradient(np.asarray(truth, dtype=np.float64))
+    magnitude = np.hypot(gx, gy)
+    count = max(1, int(round(fraction * magnitude.size)))
+    threshold = np.partition(magnitude.ravel(), magnitude.size - count)[magnitude.size - count]
+    return magnitude >= threshold
+
+
+def _bin_shares(inputs, objective):
+    """The 16 bins' shares of |input x gradient| of the scalar ``objective`` for the spike input
+    ``inputs[0]`` (its rate and interval channels of a bin together); the graph is kept for another call."""
+    import numpy as np
+    import torch
+
+    grad = torch.autograd.grad(objective, inputs[0], retain_graph=True)[0]
+    share = (grad * inputs[0]).abs().sum(dim=(0, 2, 3)).detach().numpy().astype(np.float64)
+    share = share / max(share.sum(), 1e-30)
+    return share[:16] + (share[16:32] if share.size >= 32 else 0.0)
+
+
 def temporal_support(out: Path, spec, *, weights: str | None = None, threads: int = 1) -> Path | None:
     """Write ``support.csv``: each learned method's sensitivity to each time bin (module docstring)."""
     import numpy as np
     import pandas as pd
+    import torch
 
     from neuspike.methods import create
     from neuspike.simulation.cell import simulate_sample
@@ -171,20 +213,20 @@ def temporal_support(out: Path, spec, *, weights: str | None = None, threads: in
     for cell in cells:
         sample = simulate_sample(cell.scene.spec, cell.condition, sensor=spec.sensor, seed=cell.seed,
                                  modalities=("spikes", "events"))
+        edges = torch.from_numpy(edge_mask(sample.ground_truth))
         for name, method in methods.items():
             inputs = [x.clone().requires_grad_(True) for x in method.encode(sample)[0]]
-            y = method.module(*inputs)
-            y.sum().backward()
-            x = inputs[0]
-            share = (x.grad * x).abs().sum(dim=(0, 2, 3)).detach().numpy().astype(np.float64)
-            share = share / max(share.sum(), 1e-30)
-            bins = share[:16] + (share[16:32] if share.size >= 32 else 0.0)
+            y = method.module(*inputs)[0, 0, : edges.shape[0], : edges.shape[1]]
+            bins = _bin_shares(inputs, y.sum())
+            edge_bins = _bin_shares(inputs, y[edges].sum())
             planes_per_bin = spec.sensor.planes / 16
             rows.append({"method": name, "light": cell.condition.light, "speed": speed_of(cell.scene.name),
                          "scene": cell.scene.name,
                          "support_planes": float(planes_per_bin / np.sum(bins ** 2)),
                          "centre_share": float(bins[7] + bins[8]),
-                         **{f"bin{i:02d}": float(b) for i, b in enumerate(bins)}})
+                         "edge_support_planes": float(planes_per_bin / np.sum(edge_bins ** 2)),
+                         **{f"bin{i:02d}": float(b) for i, b in enumerate(bins)},
+                         **{f"edge_bin{i:02d}": float(b) for i, b in enumerate(edge_bins)}})
     path = out / "support.csv"
     write_text(path, pd.DataFrame(rows).to_csv(index=False, float_format="%.5f"))
     return path

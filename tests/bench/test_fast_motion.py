@@ -53,3 +53,19 @@ def test_the_temporal_support_shares_sum_to_one(tmp_path, one_torch_thread):
     bins = sup[[f"bin{i:02d}" for i in range(16)]].to_numpy()
     assert np.allclose(bins.sum(axis=1), 1.0, atol=1e-4) and (bins >= 0).all()
     assert ((sup["support_planes"] >= 16 - 1e-6) & (sup["support_planes"] <= 256 + 1e-6)).all()
+
+
+def test_the_edge_support_is_measured_on_the_edges_and_its_shares_sum_to_one(tmp_path, one_torch_thread):
+    from bench.fast_motion import _spec, build_parser, edge_mask, temporal_support
+
+    step = np.zeros((20, 30))
+    step[:, 15:] = 1.0  # one vertical edge: the two columns beside it carry all the gradient
+    mask = edge_mask(step, fraction=40 / step.size)
+    assert mask.sum() == 40 and mask[:, 14:16].all()
+    assert edge_mask(np.zeros((4, 4))).any()  # a flat image still gives a pixel
+    args = build_parser().parse_args(["--size", "48x32", "--speeds", "1", "--photos", "camera", "--lights", "1/4",
+                                      "--methods", "neuspike-net-spike"])
+    sup = pd.read_csv(temporal_support(tmp_path, _spec(args)))
+    edge = sup[[f"edge_bin{i:02d}" for i in range(16)]].to_numpy()
+    assert np.allclose(edge.sum(axis=1), 1.0, atol=1e-4) and (edge >= 0).all()
+    assert ((sup["edge_support_planes"] >= 16 - 1e-6) & (sup["edge_support_planes"] <= 256 + 1e-6)).all()
