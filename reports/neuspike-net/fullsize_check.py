@@ -19,6 +19,11 @@ reference, and at the end the worst margin and the largest aligned-minus-raw gap
 that the issue's targets 1 and 2 ask of the test sweeps. Each point also shows the range of the
 error of the image's mean level (image mean minus truth mean) over its windows.
 
+``--grid fast`` scores the fast-motion test's points instead (``bench.fast_motion``: pans at 1x, 2x,
+4x, 8x and 16x the sweeps' speed, S = 256, L = 1/4 and 1/16, no noise) on the same four training
+photographs (40 windows): the selection check for fast motion, which the test itself runs on the
+test photographs.
+
 ``--level network`` scores the images as the network makes them; the default, ``counts``, as the
 method returns them (the mean level counted from the spikes where the gain and dark rate are known).
 """
@@ -48,6 +53,11 @@ SWEEP_POINTS = ([("light", f"L = 1/{round(1 / l)}", l, 128, "none") for l in (1 
                 + [("noise", f"noise {n}", 1 / 4, 128, n) for n in ("small", "medium", "high")])
 
 
+#: ``--grid fast``: the fast-motion test's points (``bench.fast_motion``), pans at 1x-16x the sweeps'
+#: speed at S = 256, (point label, light, speed factor).
+FAST_POINTS = [(f"L = 1/{round(1 / l)}, {f}x", l, f) for l in (1 / 4, 1 / 16) for f in (1, 2, 4, 8, 16)]
+
+
 def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
     return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 
@@ -71,9 +81,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="*", help="weights folders (default: the shipped weights)")
     p.add_argument("--references", default="snm", help="methods scored beside them (default: snm)")
-    p.add_argument("--grid", choices=("quick", "sweeps"), default="quick",
+    p.add_argument("--grid", choices=("quick", "sweeps", "fast"), default="quick",
                    help="quick: 48 windows, L = 1/32, 1/8, 1/2 without and with high noise (the default); "
-                   "sweeps: the full sweeps' 12 points over four scene kinds (192 windows)")
+                   "sweeps: the full sweeps' 12 points over four scene kinds (192 windows); "
+                   "fast: the fast-motion test's pans at 1x-16x, L = 1/4 and 1/16, S = 256 (40 windows)")
     p.add_argument("--method", choices=("neuspike-net", "neuspike-net-spike"), default="neuspike-net",
                    help="which variant's weights file each folder is read for (default neuspike-net)")
     p.add_argument("--level", choices=("counts", "network"), default="counts",
@@ -85,9 +96,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.grid == "quick":
         cells = [(f"{kind}:{photo}", (light, noise), light, 128, noise)
                  for photo in PHOTOS for kind in ("pan", "still") for light in LIGHTS for noise in NOISES]
-    else:
+    elif args.grid == "sweeps":
         cells = [(f"{kind}:{photo}", label, light, motion, noise) for (_, label, light, motion, noise) in SWEEP_POINTS
                  for photo in PHOTOS for kind in ("pan", "zoom", "fan", "still")]
+    else:
+        cells = [(f"pan@{f}x:{photo}" if f != 1 else f"pan:{photo}", label, light, 256, "none")
+                 for (label, light, f) in FAST_POINTS for photo in PHOTOS]
     for scene_name, key, light, motion, noise in cells:
         scene = grids.scene_entry(scene_name, (400, 250))
         cond = Condition(light=light, motion=motion, noise=noise, effects=grids.DEFAULT_EFFECTS)
