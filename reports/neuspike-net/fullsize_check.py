@@ -53,11 +53,6 @@ SWEEP_POINTS = ([("light", f"L = 1/{round(1 / l)}", l, 128, "none") for l in (1 
                 + [("noise", f"noise {n}", 1 / 4, 128, n) for n in ("small", "medium", "high")])
 
 
-#: ``--grid fast``: the fast-motion test's points (``bench.fast_motion``), pans at 1x-16x the sweeps'
-#: speed at S = 256, (point label, light, speed factor).
-FAST_POINTS = [(f"L = 1/{round(1 / l)}, {f}x", l, f) for l in (1 / 4, 1 / 16) for f in (1, 2, 4, 8, 16)]
-
-
 def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
     return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 
@@ -99,9 +94,12 @@ def main(argv: list[str] | None = None) -> int:
     elif args.grid == "sweeps":
         cells = [(f"{kind}:{photo}", label, light, motion, noise) for (_, label, light, motion, noise) in SWEEP_POINTS
                  for photo in PHOTOS for kind in ("pan", "zoom", "fan", "still")]
-    else:
-        cells = [(f"pan@{f}x:{photo}" if f != 1 else f"pan:{photo}", label, light, 256, "none")
-                 for (label, light, f) in FAST_POINTS for photo in PHOTOS]
+    else:  # the fast-motion test's own speeds, lights and S (bench.fast_motion), on training photographs
+        from bench import fast_motion as fm
+
+        scenes = fm.scene_names(",".join(str(f) for f in fm.SPEEDS), ",".join(PHOTOS))
+        cells = [(name, f"L = 1/{round(1 / light)}, {fm.speed_of(name):g}x", light, int(fm.MOTION), "none")
+                 for light in grids.parse_list(fm.LIGHTS, grids.parse_fraction) for name in scenes]
     for scene_name, key, light, motion, noise in cells:
         scene = grids.scene_entry(scene_name, (400, 250))
         cond = Condition(light=light, motion=motion, noise=noise, effects=grids.DEFAULT_EFFECTS)
