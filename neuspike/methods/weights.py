@@ -128,8 +128,13 @@ def file_sha256(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
-def load_state_strict(module: nn.Module, state: Mapping[str, torch.Tensor], source: str) -> nn.Module:
+def load_state_strict(module: nn.Module, state: Mapping[str, torch.Tensor], source: str, *,
+                      may_lack: tuple[str, ...] = ()) -> nn.Module:
     """Load ``state`` into ``module``: same names, same shapes, nothing left over; cast to the module's dtypes.
+
+    ``may_lack``: name prefixes of the module's tensors that ``state`` may leave out (they keep the
+    module's own values): parts that compute the identity as constructed, added to a design after
+    the weights were trained (training's ``init_from`` only).
 
     Raises
     ------
@@ -137,16 +142,16 @@ def load_state_strict(module: nn.Module, state: Mapping[str, torch.Tensor], sour
         Naming the missing, unused or mis-shaped tensors and ``source``.
     """
     own = module.state_dict()
-    missing = sorted(set(own) - set(state))
+    missing = sorted(k for k in set(own) - set(state) if not k.startswith(may_lack))
     unused = sorted(set(state) - set(own))
     if missing or unused:
         raise FormatError(f"{source}: missing tensors {missing[:8]}{'...' if len(missing) > 8 else ''}, "
                           f"unused tensors {unused[:8]}{'...' if len(unused) > 8 else ''}")
     wrong = [f"{k}: file {tuple(state[k].shape)}, network {tuple(own[k].shape)}"
-             for k in own if tuple(state[k].shape) != tuple(own[k].shape)]
+             for k in state if tuple(state[k].shape) != tuple(own[k].shape)]
     if wrong:
         raise FormatError(f"{source}: shapes differ: {wrong[:8]}")
-    module.load_state_dict({k: v.to(own[k].dtype) for k, v in state.items()}, strict=True)
+    module.load_state_dict({**own, **{k: v.to(own[k].dtype) for k, v in state.items()}}, strict=True)
     return module
 
 

@@ -32,6 +32,21 @@ Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back
     infer the light level from the image to turn a count into radiance, and got a scene-dependent
     offset; here the scale comes with the data.
 
+Motion gate (``motion_gate``):
+
+* ``"none"`` (the paper's): the motion features enter as they are. Instance normalisation gives
+  every motion feature map unit scale whatever the events carry, so events that are mostly noise
+  (a high shot-noise rate) reach the decoders as strongly as events that trace edges.
+* ``"stats"``: four gains ``g = 2 sigmoid(mlp(s))`` in (0, 2), one per level, scale the motion
+  features before they are fused (x_m^3 at r^0, x_m^2 and x_m^1 before F, x_m^0 in the input-level
+  skip). ``s`` are statistics of the two representations taken before any normalisation, per
+  channel over the image (128 numbers): for the spikes log(eps + mean |x|) and log(eps + std x), for
+  the events log(eps + rms x) and log(eps + rms box3(x)), box3 the 3x3 mean. Noise events are
+  spatially incoherent: the 3x3 mean spreads an isolated event over nine pixels (rms / 3), a line
+  of events over three (rms / sqrt 3), a region hardly at all. So the gate sees how dense and how
+  coherent the events are beside the spikes. The MLP's last layer starts at zero, so
+  ``g = 1`` and a network built from weights without the gate computes exactly what they computed.
+
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
 to ``F(t, 0) = t``, so the spike-only network is exactly the full one with the motion path silent,
@@ -48,7 +63,7 @@ from neuspike.errors import InputError
 from neuspike.nets.fusion import make_fusion
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
-__all__ = ["HEADS", "NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
+__all__ = ["HEADS", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
 PAPER_PARAMETERS = 5_985_000
@@ -57,6 +72,8 @@ DECODER_CHANNELS = (128, 64, 32)
 MULTIPLE = 8
 #: The prediction heads (module docstring).
 HEADS = ("tanh", "support", "support-count")
+#: The motion gates (module docstring).
+MOTION_GATES = ("none", "stats")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -83,6 +100,38 @@ class _Encoder(nn.Module):
         return feats
 
 
+class MotionGate(nn.Module):
+    """Four gains in (0, 2) for the motion features, from the representations' statistics.
+
+    (spikes, events), each (B, C, H, W) before padding -> (B, 4): the gains of x_m^3, x_m^2, x_m^1
+    and x_m^0. Exactly 1 at construction (the last layer is zero).
+    """
+
+    LEVELS = 4
+
+    def __init__(self, in_channels: int, hidden: int = 32) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(4 * in_channels, hidden), nn.ReLU(), nn.Linear(hidden, self.LEVELS))
+        nn.init.zeros_(self.mlp[2].weight)
+        nn.init.zeros_(self.mlp[2].bias)
+
+    #: Keeps the logarithm of an empty channel finite.
+    EPS = 1e-3
+
+    @classmethod
+    def statistics(cls, spikes: torch.Tensor, events: torch.Tensor) -> torch.Tensor:
+        """(B, C, H, W) x2 -> (B, 4C): per channel, log(eps + mean |spikes|), log(eps + std spikes),
+        log(eps + rms events), log(eps + rms box3(events))."""
+        spikes, events = spikes.float(), events.float()
+        smooth = F.avg_pool2d(events, 3, stride=1, padding=1, count_include_pad=False)
+        parts = [spikes.abs().mean(dim=(2, 3)), spikes.std(dim=(2, 3), correction=0),
+                 events.square().mean(dim=(2, 3)).sqrt(), smooth.square().mean(dim=(2, 3)).sqrt()]
+        return torch.log(cls.EPS + torch.cat(parts, dim=1))
+
+    def forward(self, spikes: torch.Tensor, events: torch.Tensor) -> torch.Tensor:
+        return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events)))
+
+
 class NeuSpikeNet(nn.Module):
     """NeuSpike-Net (module docstring).
 
@@ -98,13 +147,23 @@ class NeuSpikeNet(nn.Module):
         ``w`` of the input-level skip ``x_t^0 + w * x_m^0`` (1 on simulated data).
     head : str
         The prediction head, one of :data:`HEADS`.
+    motion_gate : str
+        ``"none"`` or ``"stats"`` (:data:`MOTION_GATES`, module docstring); the spike-only network
+        has no motion path and takes ``"none"`` only.
     """
 
+    #: Parts that compute the identity as constructed: weights trained without them start the same network.
+    STARTS_AS_IDENTITY = ("motion_gate.",)
+
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
-                 event_skip_weight: float = 1.0, head: str = "tanh") -> None:
+                 event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none") -> None:
         super().__init__()
         if head not in HEADS:
             raise InputError(f"NeuSpikeNet: head must be one of {HEADS}, got {head!r}")
+        if motion_gate not in MOTION_GATES:
+            raise InputError(f"NeuSpikeNet: motion_gate must be one of {MOTION_GATES}, got {motion_gate!r}")
+        if spike_only and motion_gate != "none":
+            raise InputError("NeuSpikeNet: the spike-only network has no motion path to gate (motion_gate='none')")
         self.in_channels = in_channels
         self.spike_only = spike_only
         self.head = head
@@ -114,6 +173,8 @@ class NeuSpikeNet(nn.Module):
             self.motion = _Encoder(in_channels)
             self.fuse1 = make_fusion(fusion, ENCODER_CHANNELS[0])
             self.fuse2 = make_fusion(fusion, ENCODER_CHANNELS[1])
+            if motion_gate == "stats":
+                self.motion_gate = MotionGate(in_channels)
         self.residual = nn.Sequential(NormResidualBlock(ENCODER_CHANNELS[2]), NormResidualBlock(ENCODER_CHANNELS[2]))
         self.up1 = UpConvNormReLU(ENCODER_CHANNELS[2], DECODER_CHANNELS[0])
         self.up2 = UpConvNormReLU(DECODER_CHANNELS[0] + ENCODER_CHANNELS[1], DECODER_CHANNELS[1])
@@ -155,6 +216,9 @@ class NeuSpikeNet(nn.Module):
         if self.spike_only:
             return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
         m = self.motion(pad_to_multiple(events))
+        if hasattr(self, "motion_gate"):
+            g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
+            m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
                             t[0] + self.event_skip_weight * m[0], t[0], quantum, (h, w))
 

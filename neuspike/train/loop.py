@@ -97,7 +97,8 @@ class Trainer:
         if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
             from neuspike.methods.weights import load_safetensors, load_state_strict
 
-            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from)
+            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from,
+                              may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
         if spec.optimizer == "adamw":
             self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
         else:

@@ -222,7 +222,7 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 
 
 #: Module tensors only the fusion network has (left out of the spike-only export).
-MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.")
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.")
 
 
 def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -379,6 +379,7 @@ class WindowTask:
         if variant == "spike":
             state = {k: v for k, v in state.items() if not k.startswith(MOTION_PREFIXES)}
             params["spike_only"] = True
+            params["motion_gate"] = "none"
             name = f"{name}-spike"
         return name, state, params
 

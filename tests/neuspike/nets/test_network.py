@@ -166,3 +166,66 @@ def test_parameter_count_of_the_support_head():
     assert extra == conv(32 + 32, 1 + 32) - conv(32 + 32, 1)
     with pytest.raises(InputError, match="head"):
         NeuSpikeNet(head="sigmoid")
+
+
+def test_motion_gate_adds_a_small_mlp_and_starts_as_the_ungated_network(one_torch_thread):
+    """Weights trained without the gate load into a gated network (``may_lack``) and give the same image:
+    the gate's last layer starts at zero, so every gain is exactly 1."""
+    from neuspike.methods.weights import load_state_strict
+
+    torch.manual_seed(3)
+    plain = NeuSpikeNet(head="support-count").eval()
+    gated = NeuSpikeNet(head="support-count", motion_gate="stats").eval()
+    extra = sum(p.numel() for p in gated.parameters()) - sum(p.numel() for p in plain.parameters())
+    assert extra == (4 * 32) * 32 + 32 + 32 * 4 + 4
+    load_state_strict(gated, plain.state_dict(), "plain", may_lack=gated.STARTS_AS_IDENTITY)
+    x, m, q = torch.rand(2, 32, 24, 40), torch.randn(2, 32, 24, 40), torch.full((2, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        assert torch.equal(gated.motion_gate(x, m), torch.ones(2, 4))
+        assert torch.equal(gated(x, m, q), plain(x, m, q))
+    with pytest.raises(Exception, match="missing tensors"):  # without may_lack the file is incomplete
+        load_state_strict(gated, plain.state_dict(), "plain")
+    with pytest.raises(Exception, match="missing tensors"):  # may_lack covers the gate only
+        state = {k: v for k, v in plain.state_dict().items() if not k.startswith("predict.")}
+        load_state_strict(gated, state, "plain", may_lack=gated.STARTS_AS_IDENTITY)
+
+
+def test_motion_gate_scales_each_level_of_the_motion_path(one_torch_thread):
+    """A gain of 0 at every level is the spike-only network; gains stay in (0, 2)."""
+    torch.manual_seed(4)
+    net = NeuSpikeNet(head="support-count", motion_gate="stats").eval()
+    x, m, q = torch.rand(1, 32, 24, 40), torch.randn(1, 32, 24, 40), torch.full((1, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        net.motion_gate.mlp[2].bias.fill_(-1e4)  # sigmoid -> 0: the motion path silenced
+        assert torch.allclose(net(x, m, q), net.forward_texture_only(x, q), atol=1e-6)
+        net.motion_gate.mlp[2].bias.fill_(1e4)
+        g = net.motion_gate(x, m)
+    assert torch.equal(g, torch.full_like(g, 2.0))
+    with pytest.raises(InputError, match="motion_gate"):
+        NeuSpikeNet(motion_gate="global")
+    with pytest.raises(InputError, match="spike-only"):
+        NeuSpikeNet(spike_only=True, motion_gate="stats")
+
+
+def test_motion_gate_statistics_tell_incoherent_events_from_an_edge():
+    """The 3x3 mean keeps 1/sqrt(3) of a straight edge's rms (three columns of 1/3) and about 1/3 of
+    sparse isolated events' (nine pixels of 1/9)."""
+    from neuspike.nets.network import MotionGate
+
+    g = torch.Generator().manual_seed(5)
+    h = w = 64
+    noise = torch.zeros(1, 32, h, w)
+    mask = torch.rand(1, 32, h, w, generator=g) < 0.01
+    noise[mask] = torch.where(torch.rand(int(mask.sum()), generator=g) < 0.5, -1.0, 1.0)
+    edge = torch.zeros(1, 32, h, w)
+    edge[..., w // 2] = 1.0
+    spikes = torch.rand(1, 32, h, w, generator=g)
+    s_noise, s_edge = MotionGate.statistics(spikes, noise), MotionGate.statistics(spikes, edge)
+
+    def kept(s):  # rms of box3(events) over rms of events
+        return (s[:, 96:].exp() - MotionGate.EPS) / (s[:, 64:96].exp() - MotionGate.EPS)
+
+    assert torch.allclose(kept(s_edge), torch.full((1, 32), 3 ** -0.5), atol=0.01)  # top and bottom rows: 1/2
+    assert abs(float(kept(s_noise).mean()) - 1.0 / 3.0) < 0.03
+    spike_stats = torch.cat([spikes.abs().mean(dim=(2, 3)), spikes.std(dim=(2, 3), correction=0)], dim=1)
+    assert torch.allclose(s_noise[:, :64], torch.log(MotionGate.EPS + spike_stats))
