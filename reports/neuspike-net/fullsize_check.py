@@ -8,7 +8,7 @@ instance-normalised features see other statistics, and the correction channel of
 head can shift a whole image. This check simulates 400x250 pans and stills of four training
 photographs (astronaut, brick, coffee, rocket) at L = 1/32, 1/8, 1/2, without noise and at the high
 noise level, seed 0, and prints the mean PSNR, affine-aligned PSNR and SSIM of `neuspike-net` (or, with
-``--method neuspike-net-spike``, of the spike-only variant) for each weights folder (default: the shipped weights), with the head its card names. It decides between
+``--method neuspike-net-spike``, of the spike-only variant) for each weights folder (default: the shipped weights), with the head and motion gate its card names. It decides between
 candidate weights without touching the test photographs.
 
 ``--grid sweeps`` replaces that small grid by the full sweeps' own points on the same four training
@@ -115,11 +115,11 @@ def main(argv: list[str] | None = None) -> int:
             best_ref[key] = max(best_ref[key], float(np.mean([raw[i] for i in pick])))
             best_ssim[key] = max(best_ssim[key], float(np.mean([structure[i] for i in pick])))
     for folder in folders:
-        head = {}  # the head the weights were trained with (their card), so any candidate loads
+        # the head and motion gate the weights were trained with (their card), so any candidate loads
         card = read_card(f"{folder}/{args.method}.safetensors") if folder else None
-        if card and "head" in card.get("model", {}).get("params", {}):
-            head = {"head": card["model"]["params"]["head"]}
-        method = create(args.method, weights_dir=folder, precision="float32", level=args.level, **head)
+        trained = (card or {}).get("model", {}).get("params", {})
+        design = {k: trained[k] for k in ("head", "motion_gate") if k in trained}
+        method = create(args.method, weights_dir=folder, precision="float32", level=args.level, **design)
         raw, aligned, level, structure = _score(method, samples)
         print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
               f"affine-aligned {np.mean(aligned):.2f}, SSIM {np.mean(structure):.4f}")
