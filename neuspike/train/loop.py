@@ -94,15 +94,22 @@ class Trainer:
             from neuspike.train.sequences import SequenceTask
 
             self.task = SequenceTask(spec, self.method)
+        lacked: set[str] = set()  # parameters the starting weights did not have (parts added since)
         if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
             from neuspike.methods.weights import load_safetensors, load_state_strict
 
-            load_state_strict(self.module, load_safetensors(spec.init_from), spec.init_from,
+            state = load_safetensors(spec.init_from)
+            load_state_strict(self.module, state, spec.init_from,
                               may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
+            lacked = {n for n, _ in self.module.named_parameters() if n not in state}
+        named = list(self.module.named_parameters())
+        groups = [{"params": [p for n, p in named if n not in lacked], "lr_scale": 1.0}]
+        if lacked:  # new parts start from nothing: they learn at new_parts_lr_scale times the rate
+            groups.append({"params": [p for n, p in named if n in lacked], "lr_scale": spec.new_parts_lr_scale})
         if spec.optimizer == "adamw":
-            self.optim = torch.optim.AdamW(self.module.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
+            self.optim = torch.optim.AdamW(groups, lr=spec.lr, weight_decay=spec.weight_decay)
         else:
-            self.optim = torch.optim.Adam(self.module.parameters(), lr=spec.lr)
+            self.optim = torch.optim.Adam(groups, lr=spec.lr)
         self.precision = resolve_precision(spec.precision, self.device)
         self.task.precision = self.precision
         self.step = 0
@@ -130,7 +137,7 @@ class Trainer:
         t0 = time.perf_counter()
         lr = learning_rate(self.spec, self.step)
         for group in self.optim.param_groups:
-            group["lr"] = lr
+            group["lr"] = lr * group.get("lr_scale", 1.0)
         self.module.train()
         loss, info = self.task.step_loss(self.step, self.autocast)
         self.optim.zero_grad(set_to_none=True)

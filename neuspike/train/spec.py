@@ -325,7 +325,11 @@ class TrainSpec:
         Overrides of the method's registered parameters.
     init_from : str or None
         Weights (a ``.safetensors`` of the full module) to start from instead of a fresh
-        initialisation; a checkpoint in ``out_dir`` still wins.
+        initialisation; a checkpoint in ``out_dir`` still wins. The file may lack parts that the
+        module builds as the identity (``STARTS_AS_IDENTITY``, such as NeuSpike-Net's motion gate).
+    new_parts_lr_scale : float
+        With ``init_from``: the parts the file lacked learn at this multiple of the schedule's rate
+        (1: like the rest). They start from nothing while the rest is already trained.
     export : bool
         Also write the best weights into the package's ``neuspike/trained/``.
     export_dir : str or None
@@ -351,6 +355,7 @@ class TrainSpec:
     precision: str = "auto"
     params: dict[str, Any] = field(default_factory=dict)
     init_from: str | None = None
+    new_parts_lr_scale: float = 1.0
     export: bool = False
     export_dir: str | None = None
 
@@ -377,6 +382,9 @@ class TrainSpec:
             raise InputError(f"device: expected a torch device name such as 'cpu' or 'cuda', got {self.device!r}")
         if self.precision not in ("auto", "float32", "bfloat16"):
             raise InputError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
+        if not (isinstance(self.new_parts_lr_scale, (int, float)) and math.isfinite(self.new_parts_lr_scale)
+                and self.new_parts_lr_scale > 0):
+            raise InputError(f"new_parts_lr_scale: expected a positive number, got {self.new_parts_lr_scale!r}")
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
         if isinstance(self.data, WindowData):

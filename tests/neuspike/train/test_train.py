@@ -149,6 +149,33 @@ def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_
     assert all(second.best[v]["val_psnr"] >= baseline[v] for v in baseline)
 
 
+def test_a_stage_that_adds_the_motion_gate_starts_as_the_weights_and_trains_the_gate_faster(tmp_path, one_torch_thread):
+    """Weights without the gate start a gated run unchanged; the gate's parameters (and only they) learn at
+    new_parts_lr_scale times the rate; the spike-only export leaves the gate out."""
+    from neuspike.methods.weights import load_safetensors
+
+    shard = str(tmp_path / "shard")
+    Trainer(tiny_spec(tmp_path / "a", shard_dir=shard, steps=1), quiet=True).run()
+    weights = tmp_path / "a" / "run" / "neuspike-net.safetensors"
+    with pytest.raises(InputError, match="new_parts_lr_scale"):
+        tiny_spec(tmp_path / "b", shard_dir=shard, new_parts_lr_scale=0.0)
+    spec = tiny_spec(tmp_path / "b", shard_dir=shard, steps=4, init_from=str(weights), new_parts_lr_scale=10.0,
+                     params={"motion_gate": "stats"})
+    second = Trainer(spec, quiet=True)
+    saved = load_safetensors(weights)
+    gate = {k for k in second.module.state_dict() if k.startswith("motion_gate.")}
+    assert gate and set(second.module.state_dict()) - set(saved) == gate
+    for k in saved:
+        assert torch.equal(second.module.state_dict()[k], saved[k].to(torch.float32)), k
+    second.run()
+    rest, new = second.optim.param_groups
+    assert {id(p) for p in new["params"]} == {id(p) for n, p in second.module.named_parameters() if n in gate}
+    assert new["lr"] == pytest.approx(10.0 * rest["lr"]) and rest["lr"] == pytest.approx(learning_rate(spec, 3))
+    name, state, params = second.task.exported("spike", "neuspike-net")
+    assert name == "neuspike-net-spike" and params["motion_gate"] == "none" and params["spike_only"] is True
+    assert not any(k.startswith("motion_gate.") for k in state)
+
+
 def test_auto_precision_takes_bfloat16_only_when_a_measured_step_is_faster_and_a_resume_keeps_it(
         tmp_path, one_torch_thread, monkeypatch):
     import json
