@@ -9,7 +9,9 @@ size (padded to multiples of 8, cropped back). The paper's head (a convolution a
 features carry no absolute scale; the shipped weights use ``head="support-count"``: a per-pixel
 softmax over the spike representation's 32 radiance estimates (the temporal support the motion
 allows) plus an additive correction counted in spikes per group and scaled by the data's own spike
-quantum (:mod:`neuspike.nets.network`).
+quantum (:mod:`neuspike.nets.network`). An optional motion gate (``motion_gate="stats"``) scales the
+motion path at each level by gains computed from the representations' un-normalised statistics, so
+that noise-dominated events can be turned down (instance normalisation alone gives them full scale).
 
 Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
 :mod:`neuspike.nets.fusion`), chosen by a short measured ablation: each candidate trained from the
