@@ -108,15 +108,14 @@ class MotionGate(nn.Module):
     """
 
     LEVELS = 4
+    #: Keeps the logarithm of an empty channel finite.
+    EPS = 1e-3
 
     def __init__(self, in_channels: int, hidden: int = 32) -> None:
         super().__init__()
         self.mlp = nn.Sequential(nn.Linear(4 * in_channels, hidden), nn.ReLU(), nn.Linear(hidden, self.LEVELS))
         nn.init.zeros_(self.mlp[2].weight)
         nn.init.zeros_(self.mlp[2].bias)
-
-    #: Keeps the logarithm of an empty channel finite.
-    EPS = 1e-3
 
     @classmethod
     def statistics(cls, spikes: torch.Tensor, events: torch.Tensor) -> torch.Tensor:

@@ -19,7 +19,8 @@ from typing import Any, Sequence
 from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
-WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight")
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight",
+               "scale_range")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
 #: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
@@ -104,6 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--speed-range", metavar="LOW,HIGH",
                    help="single windows: pan speeds drawn log-uniformly (px/s at a view 400 pixels wide; default "
                         "100,4000; the sweeps pan at 1000)")
+    d.add_argument("--scale-range", metavar="LOW,HIGH",
+                   help="single windows: scale of a photograph's region relative to the sweeps' frame, drawn "
+                        "log-uniformly; speeds then scale with it (default: the original 0.3-1.2 draw with the "
+                        "sensor shrunk to the view)")
     d.add_argument("--spike-only-fraction", type=float,
                    help="single windows: fraction of steps training the spike-only variant of a fusion network "
                         "(default 0.3)")
@@ -188,6 +193,13 @@ def spec_from_args(args: argparse.Namespace):
             raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}") from None
         if len(kw["speed_range"]) != 2:
             raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}")
+    if args.scale_range is not None:
+        try:
+            kw["scale_range"] = tuple(float(v) for v in _list(args.scale_range))
+        except ValueError:
+            raise InputError(f"--scale-range: expected LOW,HIGH, got {args.scale_range!r}") from None
+        if len(kw["scale_range"]) != 2:
+            raise InputError(f"--scale-range: expected LOW,HIGH, got {args.scale_range!r}")
     for name in ("view", "val_view"):
         if getattr(args, name) is not None:
             from neuspike.utils.checks import parse_size

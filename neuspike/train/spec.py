@@ -100,7 +100,17 @@ class WindowData:
     speed_range : (float, float)
         Pan and dead-leaves speeds (px/s of scene time at a view 400 pixels wide, scaled with the
         view) drawn log-uniformly in this range, in a uniformly drawn direction. The sweeps pan at
-        1000 px/s; at S = 256 a window spans about 11 ms of scene time.
+        1000 px/s; at S = 256 a window spans about 11 ms of scene time. With ``scale_range`` the
+        speeds are in px/s at the sensor's native scale instead, scaled by the view's scale.
+    scale_range : (float, float) or None
+        ``None`` (the default, the shards made before the field): a photograph's region is drawn at
+        0.3-1.2 times the scale at which the photograph fills the 400x250 sensor (the sweeps' scale),
+        and pans move at ``speed_range`` times view / 400, as if the whole sensor were shrunk to the
+        view. Given: the region's scale r is drawn log-uniformly in this range (1 = the sweeps'
+        scale, so a 128-pixel view of r = 1 is a 128-pixel crop of a sweep's frame) and every speed
+        is multiplied by r, so a scene moves as many of its own pixels per window as in the sweeps.
+        The default draw has a third of the sweeps' scale on average: per pixel, the training views
+        carry about three times the detail, and edge events stand out more against noise events.
     noise_levels, photos : tuple of str
         Noise levels drawn uniformly (repeat a level to draw it more often); training photographs
         (the test photographs are refused).
@@ -138,6 +148,7 @@ class WindowData:
     spike_only_fraction: float = 0.3
     offset_weight: float = 0.0
     val_view: tuple[int, int] | None = None
+    scale_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -164,6 +175,14 @@ class WindowData:
         if not 0 < lo <= hi:
             raise InputError(f"speed_range: expected 0 < low <= high px/s, got {self.speed_range}")
         put(self, "speed_range", (lo, hi))
+        if self.scale_range is not None:
+            try:
+                lo, hi = (float(v) for v in self.scale_range)
+            except (TypeError, ValueError):
+                raise InputError(f"scale_range: expected (low, high), got {self.scale_range!r}") from None
+            if not 0 < lo <= hi:
+                raise InputError(f"scale_range: expected 0 < low <= high, got {self.scale_range}")
+            put(self, "scale_range", (lo, hi))
         motions = tuple(int(m) for m in self.motions)
         if not motions or any(m < 1 for m in motions):
             raise InputError(f"motions: expected motion scales >= 1, got {self.motions}")
@@ -182,6 +201,8 @@ class WindowData:
             key["speed_range"] = list(self.speed_range)
         if self.val_view is not None:  # likewise
             key["val_view"] = list(self.val_view)
+        if self.scale_range is not None:  # likewise
+            key["scale_range"] = list(self.scale_range)
         return key
 
 

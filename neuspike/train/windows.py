@@ -58,15 +58,23 @@ BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
 SENSOR_SIZE = (400, 250)
 
 
+#: The region's scale relative to the sweeps' without ``scale_range`` (the original draw).
+LEGACY_SCALE_RANGE = (0.3, 1.2)
+
+
 def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int,
-                  size: tuple[int, int]) -> str:
-    """A region of a training photograph resized to ``size`` (width, height), saved under ``source_dir``."""
+                  size: tuple[int, int], relative_scale: float | None = None) -> str:
+    """A region of a training photograph resized to ``size`` (width, height), saved under ``source_dir``;
+    ``relative_scale`` (drawn here from :data:`LEGACY_SCALE_RANGE` when None) is its scale relative to
+    the photograph filling the 400x250 sensor."""
     data: WindowData = spec.data
     name = data.photos[int(rng.integers(len(data.photos)))]
     luma = read_photo(name)
     h, w = luma.shape
     vw, vh = size
-    scale = max(SENSOR_SIZE[0] / w, SENSOR_SIZE[1] / h) * float(np.exp(rng.uniform(np.log(0.3), np.log(1.2))))
+    if relative_scale is None:
+        relative_scale = float(np.exp(rng.uniform(*np.log(LEGACY_SCALE_RANGE))))
+    scale = max(SENSOR_SIZE[0] / w, SENSOR_SIZE[1] / h) * relative_scale
     if vw == vh:  # the square training view (the shards' original draw)
         sw = sh = min(int(round(vw / scale)), h, w)
     else:  # a full-size validation view: the same scale where the photograph allows, its aspect kept
@@ -96,12 +104,18 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     size = tuple(data.val_view) if split == "val" and data.val_view is not None else (data.view, data.view)
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
-    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * size[0] / SENSOR_SIZE[0]
+    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    if data.scale_range is None:  # the original draw: the sensor shrunk to the view
+        relative_scale = None
+        speed *= size[0] / SENSOR_SIZE[0]
+    else:  # the region at a drawn scale of the sweeps' frame, moving as a sweep's scene would at that scale
+        relative_scale = float(np.exp(rng.uniform(*np.log(data.scale_range))))
+        speed *= relative_scale
     velocity = (speed * np.cos(angle), speed * np.sin(angle))
     if kind == "dead_leaves":
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
     else:
-        image = _photo_source(spec, rng, Path(source_dir), split, index, size)
+        image = _photo_source(spec, rng, Path(source_dir), split, index, size, relative_scale)
         focus = (float(rng.uniform(0.2, 0.8) * size[0]), float(rng.uniform(0.2, 0.8) * size[1]))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)

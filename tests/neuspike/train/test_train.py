@@ -64,6 +64,31 @@ def test_pan_speeds_are_drawn_in_the_speed_range_and_old_shard_keys_stay(tmp_pat
         WindowData(speed_range=(0, 100))
 
 
+def test_scale_range_draws_the_region_at_the_sweeps_scale_and_moves_it_as_a_sweep_would(tmp_path, monkeypatch):
+    """On a horizontal ramp photograph (800x500: it fills the 400x250 sensor at half size), a view at r = 1 spans
+    80 photograph pixels in 40 (slope 2/800 per pixel), at r = 0.5 twice that; speeds are the drawn px/s times r.
+    Without the field the original draw (and the old shard keys) stay."""
+    from neuspike.train import windows
+
+    ramp = np.tile(np.arange(800, dtype=np.float32) / 800, (500, 1))
+    monkeypatch.setattr(windows, "read_photo", lambda name: ramp)
+    for r in (1.0, 0.5):
+        spec = tiny_spec(tmp_path / str(r), view=40, speed_range=(5000.0, 20000.0), scale_range=(r, r))
+        cells = [draw_cell(spec, "train", i, tmp_path / str(r)) for i in range(40)]
+        speeds = [float(np.hypot(*scene.velocity_px_s)) / r for scene, *_ in cells
+                  if scene.kind in ("pan", "dead_leaves")]
+        assert len(speeds) > 5 and min(speeds) >= 5000.0 - 1e-6 and max(speeds) <= 20000.0 + 1e-6
+        for scene, *_ in cells:
+            if scene.kind != "dead_leaves":
+                slope = np.diff(np.load(scene.image)[:, 4:-4], axis=1)
+                assert np.allclose(slope, (2 / r) / 800, atol=1e-5)
+    assert WindowData(scale_range=(0.5, 2)).key(0)["scale_range"] == [0.5, 2.0]
+    assert "scale_range" not in WindowData().key(0)
+    for bad in ((0, 1), (2, 1), "x"):
+        with pytest.raises(InputError, match="scale_range"):
+            WindowData(scale_range=bad)
+
+
 def test_saved_windows_load_back_identically(tmp_path):
     spec = tiny_spec(tmp_path)
     s = simulate_cell(spec, "val", 0, tmp_path)
