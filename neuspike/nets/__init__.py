@@ -9,7 +9,7 @@ size (padded to multiples of 8, cropped back). The paper's head (a convolution a
 features carry no absolute scale; the shipped weights use ``head="support-count"``: a per-pixel
 softmax over the spike representation's 32 radiance estimates (the temporal support the motion
 allows) plus an additive correction counted in spikes per group and scaled by the data's own spike
-quantum (:mod:`neuspike.nets.network`). An optional motion gate (``motion_gate="stats"``) scales the
+quantum (:mod:`neuspike.nets.network`). The shipped fusion weights also have a motion gate (``motion_gate="stats"``): it scales the
 motion path at each level by gains computed from the representations' un-normalised statistics, so
 that noise-dominated events can be turned down (instance normalisation alone gives them full scale).
 
@@ -62,7 +62,7 @@ DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "ev
 
 def register_methods(register: Callable[..., Any]) -> None:
     """Register ``neuspike-net`` and ``neuspike-net-spike`` (the ``neuspike.methods`` entry point)."""
-    register("neuspike-net", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, "spike_only": False},
+    register("neuspike-net", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, "spike_only": False, "motion_gate": "stats"},
              inputs={"spikes", "events"}, weights="neuspike-net.safetensors",
              description="NeuSpike-Net: spike + event fusion U-Net (trained here on the simulator)")
     register("neuspike-net-spike", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, "spike_only": True},
