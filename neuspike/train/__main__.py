@@ -145,6 +145,19 @@ def _list(text: str) -> tuple[str, ...]:
     return tuple(v.strip() for v in text.split(",") if v.strip())
 
 
+def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
+    """``"LOW,HIGH"`` -> (low, high); a clear error naming ``flag`` otherwise."""
+    from neuspike.errors import InputError
+
+    try:
+        pair = tuple(float(v) for v in _list(text))
+    except ValueError:
+        pair = ()
+    if len(pair) != 2:
+        raise InputError(f"{flag}: expected LOW,HIGH{unit}, got {text!r}")
+    return pair
+
+
 def spec_from_args(args: argparse.Namespace):
     """The :class:`~neuspike.train.spec.TrainSpec` of parsed arguments (imports the registry)."""
     from dataclasses import replace
@@ -186,20 +199,9 @@ def spec_from_args(args: argparse.Namespace):
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
-    if args.speed_range is not None:
-        try:
-            kw["speed_range"] = tuple(float(v) for v in _list(args.speed_range))
-        except ValueError:
-            raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}") from None
-        if len(kw["speed_range"]) != 2:
-            raise InputError(f"--speed-range: expected LOW,HIGH in px/s, got {args.speed_range!r}")
-    if args.scale_range is not None:
-        try:
-            kw["scale_range"] = tuple(float(v) for v in _list(args.scale_range))
-        except ValueError:
-            raise InputError(f"--scale-range: expected LOW,HIGH, got {args.scale_range!r}") from None
-        if len(kw["scale_range"]) != 2:
-            raise InputError(f"--scale-range: expected LOW,HIGH, got {args.scale_range!r}")
+    for name, unit in (("speed_range", " in px/s"), ("scale_range", "")):
+        if getattr(args, name) is not None:
+            kw[name] = _pair(getattr(args, name), f"--{name.replace('_', '-')}", unit)
     for name in ("view", "val_view"):
         if getattr(args, name) is not None:
             from neuspike.utils.checks import parse_size

@@ -55,6 +55,15 @@ def test_the_light_spec_module_agrees_with_the_heavy_ones():
     assert tuple(NOISE_LEVELS) == tuple(levels) and WindowData().photos == tuple(TRAIN_PHOTOS) == tuple(PHOTOS)
 
 
+def test_range_flags_set_the_window_ranges_and_refuse_anything_but_two_numbers():
+    spec = _args("neuspike-net --speed-range 100,20000 --scale-range 0.5,1.5")
+    assert spec.data.speed_range == (100.0, 20000.0) and spec.data.scale_range == (0.5, 1.5)
+    assert _args("neuspike-net").data.scale_range is None
+    for flag, bad in (("--speed-range", "1,x"), ("--scale-range", "1"), ("--scale-range", "1,2,3")):
+        with pytest.raises(InputError, match=flag):
+            _args(f"neuspike-net {flag} {bad}")
+
+
 def test_old_spec_files_are_the_runs_the_new_command_makes():
     """A folder of either earlier trainer resumes under python -m neuspike.train with the same flags."""
     old = spec_from_dict(OLD_E2VID, out_dir="runs/e2vid")
