@@ -109,8 +109,9 @@ class WindowData:
         view. Given: the region's scale r is drawn log-uniformly in this range (1 = the sweeps'
         scale, so a 128-pixel view of r = 1 is a 128-pixel crop of a sweep's frame) and every speed
         is multiplied by r, so a scene moves as many of its own pixels per window as in the sweeps.
-        The default draw has a third of the sweeps' scale on average: per pixel, the training views
-        carry about three times the detail, and edge events stand out more against noise events.
+        The default draw is at 0.6 of the sweeps' scale on average (geometric mean): per pixel, the
+        training views carry about 1.7 times the sweeps' detail, and edge events stand out more
+        against noise events.
     noise_levels, photos : tuple of str
         Noise levels drawn uniformly (repeat a level to draw it more often); training photographs
         (the test photographs are refused).
