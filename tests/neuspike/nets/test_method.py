@@ -107,8 +107,8 @@ def test_unknown_gain_is_estimated_from_the_data():
 @pytest.fixture
 def weights_dir(tmp_path):
     torch.manual_seed(0)
-    for name, spike_only in (("neuspike-net", False), ("neuspike-net-spike", True)):
-        params = {**DEFAULT_DESIGN, "spike_only": spike_only}
+    for name in ("neuspike-net", "neuspike-net-spike"):
+        params = dict(entry(name).params)  # the registered design (the fusion network's has the motion gate)
         module = NeuSpikeNetMethod.for_training(name, **params).module
         save_safetensors(module, tmp_path / f"{name}.safetensors", card={"model": {"params": params}})
     return tmp_path
@@ -176,7 +176,7 @@ def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
 
 
 def test_weights_of_the_wrong_shape_are_a_format_error(tmp_path):
-    params = {**DEFAULT_DESIGN, "spike_only": False}
+    params = dict(entry("neuspike-net").params)
     state = NeuSpikeNetMethod.for_training("neuspike-net", **params).module.state_dict()
     state["predict.weight"] = torch.zeros(1, 10, 3, 3)
     save_safetensors(state, tmp_path / "neuspike-net.safetensors")
@@ -208,11 +208,13 @@ def test_weights_trained_for_another_design_are_refused(weights_dir):
 def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tmp_path):
     params = {**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"}
     module = NeuSpikeNetMethod.for_training("neuspike-net", **params).module
-    old_card = {k: v for k, v in params.items() if k != "head"}  # a card written before heads existed
+    old_card = {k: v for k, v in params.items() if k != "head"}  # a card written before heads and gates existed
     save_safetensors(module, tmp_path / "neuspike-net.safetensors", card={"model": {"params": old_card}})
-    assert create("neuspike-net", weights_dir=tmp_path, head="tanh").module.head == "tanh"
+    assert create("neuspike-net", weights_dir=tmp_path, head="tanh", motion_gate="none").module.head == "tanh"
     with pytest.raises(FormatError, match="trained for"):
-        create("neuspike-net", weights_dir=tmp_path, head="support")
+        create("neuspike-net", weights_dir=tmp_path, head="support", motion_gate="none")
+    with pytest.raises(FormatError, match="motion_gate"):  # an old card means no gate
+        create("neuspike-net", weights_dir=tmp_path, head="tanh")
     assert DEFAULT_DESIGN["head"] == "support-count" == create("neuspike-net").module.head  # the shipped weights
 
 

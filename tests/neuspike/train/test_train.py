@@ -180,7 +180,7 @@ def test_a_stage_that_adds_the_motion_gate_starts_as_the_weights_and_trains_the_
     from neuspike.methods.weights import load_safetensors
 
     shard = str(tmp_path / "shard")
-    Trainer(tiny_spec(tmp_path / "a", shard_dir=shard, steps=1), quiet=True).run()
+    Trainer(tiny_spec(tmp_path / "a", shard_dir=shard, steps=1, params={"motion_gate": "none"}), quiet=True).run()
     weights = tmp_path / "a" / "run" / "neuspike-net.safetensors"
     with pytest.raises(InputError, match="new_parts_lr_scale"):
         tiny_spec(tmp_path / "b", shard_dir=shard, new_parts_lr_scale=0.0)
