@@ -231,7 +231,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         card = read_card(path)
         trained = (card or {}).get("model", {}).get("params")
         if trained is not None:
-            ours = {k: self.params.get(k, CARD_DEFAULTS.get(k)) for k in ARCHITECTURE_PARAMS}
+            ours = {k: self.params[k] for k in ARCHITECTURE_PARAMS}
             theirs = {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in ARCHITECTURE_PARAMS}
             if ours != theirs:
                 raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")

@@ -53,6 +53,14 @@ SWEEP_POINTS = ([("light", f"L = 1/{round(1 / l)}", l, 128, "none") for l in (1 
                 + [("noise", f"noise {n}", 1 / 4, 128, n) for n in ("small", "medium", "high")])
 
 
+def trained_design(folder: str | None, method: str) -> dict[str, str]:
+    """The head and motion gate that ``folder``'s weights of ``method`` were trained with (their card;
+    empty for the shipped weights), so that any candidate loads."""
+    card = read_card(f"{folder}/{method}.safetensors") if folder else None
+    trained = (card or {}).get("model", {}).get("params", {})
+    return {k: trained[k] for k in ("head", "motion_gate") if k in trained}
+
+
 def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
     return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 
@@ -115,11 +123,8 @@ def main(argv: list[str] | None = None) -> int:
             best_ref[key] = max(best_ref[key], float(np.mean([raw[i] for i in pick])))
             best_ssim[key] = max(best_ssim[key], float(np.mean([structure[i] for i in pick])))
     for folder in folders:
-        # the head and motion gate the weights were trained with (their card), so any candidate loads
-        card = read_card(f"{folder}/{args.method}.safetensors") if folder else None
-        trained = (card or {}).get("model", {}).get("params", {})
-        design = {k: trained[k] for k in ("head", "motion_gate") if k in trained}
-        method = create(args.method, weights_dir=folder, precision="float32", level=args.level, **design)
+        method = create(args.method, weights_dir=folder, precision="float32", level=args.level,
+                        **trained_design(folder, args.method))
         raw, aligned, level, structure = _score(method, samples)
         print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
               f"affine-aligned {np.mean(aligned):.2f}, SSIM {np.mean(structure):.4f}")

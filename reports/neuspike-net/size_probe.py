@@ -17,18 +17,15 @@ import numpy as np
 import torch
 
 from bench import grid as grids
+from fullsize_check import trained_design  # beside this script
 from neuspike.conditions import Condition
 from neuspike.methods import create
-from neuspike.methods.weights import read_card
+from neuspike.metrics import psnr
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
 PHOTOS = ("astronaut", "brick", "coffee", "rocket")
 KINDS = ("pan", "zoom", "fan", "still")
-
-
-def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
-    return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,9 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
-    card = read_card(f"{args.folder}/neuspike-net.safetensors") if args.folder else None
-    design = {k: v for k, v in (card or {}).get("model", {}).get("params", {}).items() if k in ("head", "motion_gate")}
-    fusion = create("neuspike-net", weights_dir=args.folder, precision="float32", **design)
+    fusion = create("neuspike-net", weights_dir=args.folder, precision="float32",
+                    **trained_design(args.folder, "neuspike-net"))
     spike = create("neuspike-net-spike", weights_dir=args.folder, precision="float32")
     for size in ((400, 250), (128, 128)):
         for noise in ("none", "high"):
@@ -50,7 +46,8 @@ def main(argv: list[str] | None = None) -> int:
                     scene = grids.scene_entry(f"{kind}:{photo}", size)
                     cond = Condition(light=0.25, motion=128, noise=noise, effects=grids.DEFAULT_EFFECTS)
                     s = simulate_sample(scene.spec, cond, sensor=SensorConfig(), seed=0, modalities=("spikes", "events"))
-                    f, o = _psnr(fusion.reconstruct(s), s.ground_truth), _psnr(spike.reconstruct(s), s.ground_truth)
+                    f = psnr(fusion.reconstruct(s), s.ground_truth, data_range=1.0)
+                    o = psnr(spike.reconstruct(s), s.ground_truth, data_range=1.0)
                     scores.append((f, o))
                     diffs[kind].append(f - o)
             v = np.array(scores)
