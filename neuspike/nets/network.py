@@ -2,8 +2,8 @@
 
 Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back):
 
-* texture path (spikes) and motion path (events), each zero-padded with its normalisation statistics
-  taken over the image alone (:func:`pad_to_multiple`): x^0 (B, 32, H, W) -> three strided 3x3
+* texture path (spikes) and motion path (events), each padded by repeating its last row and column
+  (:func:`pad_to_multiple`): x^0 (B, 32, H, W) -> three strided 3x3
   conv + instance norm + ReLU layers -> x^1 (B, 64, H/2, W/2), x^2 (B, 128, H/4, W/4),
   x^3 (B, 256, H/8, W/8);
 * r^0 = x_t^3 + x_m^3, then two residual blocks (3x3, 256, instance norm before ReLU);
@@ -62,7 +62,7 @@ from torch import nn
 
 from neuspike.errors import InputError
 from neuspike.nets.fusion import make_fusion
-from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU, valid_extent
+from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
 __all__ = ["HEADS", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
 
@@ -78,19 +78,20 @@ MOTION_GATES = ("none", "stats")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
-    """Zero-pad (B, C, H, W) at the bottom and right to multiples of ``multiple`` (250 -> 256 rows).
+    """Pad (B, C, H, W) at the bottom and right to multiples of ``multiple`` (250 -> 256 rows) by
+    repeating the last row and column.
 
     Sides are padded to at least ``2 * multiple`` so that the deepest features have more than one
-    pixel (instance normalisation needs two). The network runs the padded input inside
-    :func:`neuspike.nn.blocks.valid_extent`, so its normalisation statistics leave the padding out:
-    the training crops are multiples of 8 and never padded, and a band of zeros in a representation
-    that is nowhere else zero (shot noise in every pixel) otherwise gives the deepest features a
-    strong response that instance normalisation spreads over the whole image (on the sweeps' 400x250
-    frames at high noise it cost the fusion 2.3 dB; ``reports/neuspike-net/README.md``, "Padding").
+    pixel (instance normalisation needs two). The padding repeats the edge rather than adding zeros:
+    the network trains on crops whose sides are multiples of 8 and never sees a border, and a band of
+    zeros in a representation that is nowhere else zero (shot noise in every pixel) gives the
+    deepest features a strong response that instance normalisation spreads over the whole image. On
+    the sweeps' 400x250 frames at high noise, zero rows cost the fusion network 2.4 dB and its
+    spike-only variant 1.3 dB (``reports/neuspike-net/README.md``, "Padding").
     """
     h, w = x.shape[-2:]
     ph, pw = max((-h) % multiple, 2 * multiple - h), max((-w) % multiple, 2 * multiple - w)
-    return F.pad(x, (0, pw, 0, ph)) if ph or pw else x
+    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
 
 
 class _Encoder(nn.Module):
@@ -217,17 +218,15 @@ class NeuSpikeNet(nn.Module):
             if events.shape != spikes.shape:
                 raise InputError(f"NeuSpikeNet: events {tuple(events.shape)} and spikes {tuple(spikes.shape)} differ")
         h, w = spikes.shape[-2:]
-        padded = pad_to_multiple(spikes)
-        with valid_extent(h, w, *padded.shape[-2:]):
-            t = self.texture(padded)
-            if self.spike_only:
-                return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
-            m = self.motion(pad_to_multiple(events))
-            if hasattr(self, "motion_gate"):
-                g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
-                m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
-            return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                                t[0] + self.event_skip_weight * m[0], t[0], quantum, (h, w))
+        t = self.texture(pad_to_multiple(spikes))
+        if self.spike_only:
+            return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
+        m = self.motion(pad_to_multiple(events))
+        if hasattr(self, "motion_gate"):
+            g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
+            m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
+        return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
+                            t[0] + self.event_skip_weight * m[0], t[0], quantum, (h, w))
 
     def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None) -> torch.Tensor:
         """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
@@ -237,10 +236,8 @@ class NeuSpikeNet(nn.Module):
         """
         self._check_inputs(spikes, quantum)
         h, w = spikes.shape[-2:]
-        padded = pad_to_multiple(spikes)
-        with valid_extent(h, w, *padded.shape[-2:]):
-            t = self.texture(padded)
-            return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
+        t = self.texture(pad_to_multiple(spikes))
+        return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
 
     def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None) -> None:
         if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
