@@ -2,8 +2,7 @@
 
 Shapes (B batch; H, W any size, padded inside to multiples of 8 and cropped back):
 
-* texture path (spikes) and motion path (events), each padded by repeating its last row and column
-  (:func:`pad_to_multiple`): x^0 (B, 32, H, W) -> three strided 3x3
+* texture path (spikes) and motion path (events): x^0 (B, 32, H, W) -> three strided 3x3
   conv + instance norm + ReLU layers -> x^1 (B, 64, H/2, W/2), x^2 (B, 128, H/4, W/4),
   x^3 (B, 256, H/8, W/8);
 * r^0 = x_t^3 + x_m^3, then two residual blocks (3x3, 256, instance norm before ReLU);
@@ -78,20 +77,14 @@ MOTION_GATES = ("none", "stats")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
-    """Pad (B, C, H, W) at the bottom and right to multiples of ``multiple`` (250 -> 256 rows) by
-    repeating the last row and column.
+    """Zero-pad (B, C, H, W) at the bottom and right to multiples of ``multiple`` (250 -> 256 rows).
 
     Sides are padded to at least ``2 * multiple`` so that the deepest features have more than one
-    pixel (instance normalisation needs two). The padding repeats the edge rather than adding zeros:
-    the network trains on crops whose sides are multiples of 8 and never sees a border, and a band of
-    zeros in a representation that is nowhere else zero (shot noise in every pixel) gives the
-    deepest features a strong response that instance normalisation spreads over the whole image. On
-    the sweeps' 400x250 frames at high noise, zero rows cost the fusion network 2.4 dB and its
-    spike-only variant 1.3 dB (``reports/neuspike-net/README.md``, "Padding").
+    pixel (instance normalisation needs two).
     """
     h, w = x.shape[-2:]
     ph, pw = max((-h) % multiple, 2 * multiple - h), max((-w) % multiple, 2 * multiple - w)
-    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
+    return F.pad(x, (0, pw, 0, ph)) if ph or pw else x
 
 
 class _Encoder(nn.Module):

@@ -52,19 +52,12 @@ def test_any_size_is_padded_and_cropped_back(hw, one_torch_thread):
     assert float(y.min()) >= 0.0 and float(y.max()) <= 1.0
 
 
-def test_padding_repeats_the_last_row_and_column_to_multiples_of_8():
-    x = torch.randn(1, 2, 250, 401, generator=torch.Generator().manual_seed(0))
+def test_padding_is_zero_at_bottom_right_to_multiples_of_8():
+    x = torch.ones(1, 2, 250, 401)
     p = pad_to_multiple(x)
     assert p.shape == (1, 2, 256, 408)
     assert torch.equal(p[..., :250, :401], x)
-    assert torch.equal(p[..., 250:, :401], x[..., 249:250, :].expand(-1, -1, 6, -1))
-    assert torch.equal(p[..., :250, 401:], x[..., :, 400:401].expand(-1, -1, -1, 7))
-    assert torch.equal(p[..., 250:, 401:], x[..., 249:250, 400:401].expand(-1, -1, 6, 7))
-    # tiny inputs still reach two pixels at the deepest level
-    assert pad_to_multiple(torch.ones(1, 1, 3, 5)).shape == (1, 1, 16, 16)
-    # a side already a multiple of 8 is left alone
-    y = torch.randn(1, 1, 96, 128)
-    assert pad_to_multiple(y) is y
+    assert float(p[..., 250:, :].abs().sum()) == 0.0 and float(p[..., :, 401:].abs().sum()) == 0.0
 
 
 @pytest.mark.parametrize("fusion", FUSIONS)
