@@ -229,3 +229,12 @@ def test_motion_gate_statistics_tell_incoherent_events_from_an_edge():
     assert abs(float(kept(s_noise).mean()) - 1.0 / 3.0) < 0.03
     spike_stats = torch.cat([spikes.abs().mean(dim=(2, 3)), spikes.std(dim=(2, 3), correction=0)], dim=1)
     assert torch.allclose(s_noise[:, :64], torch.log(MotionGate.EPS + spike_stats))
+
+
+@pytest.mark.parametrize("hw", [(1, 1), (1, 6), (2, 2), (5, 7), (250, 400)])
+def test_gate_box_mean_is_the_3x3_mean_inside_the_image(hw):
+    from neuspike.nets.network import MotionGate
+
+    x = torch.randn(2, 3, *hw, generator=torch.Generator().manual_seed(0))
+    expect = torch.nn.functional.avg_pool2d(x, 3, stride=1, padding=1, count_include_pad=False)
+    assert torch.allclose(MotionGate.box3(x), expect, atol=1e-6)
