@@ -20,7 +20,7 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight",
-               "scale_range")
+               "scale_range", "crop_trim")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
 #: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
@@ -118,6 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "instead of the square training view, so the best step is chosen on whole frames")
     d.add_argument("--offset-weight", type=float, metavar="W",
                    help="single windows: add W x the error of each crop's mean level to the loss (default 0)")
+    d.add_argument("--crop-trim", type=int, metavar="N",
+                   help="single windows: cut 0..N rows and 0..N columns (drawn per step) off each batch's crops, so "
+                        "the network trains on sides that it pads as at inference (0..7; default 0)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -192,7 +195,7 @@ def spec_from_args(args: argparse.Namespace):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
-                 "offset_weight"):
+                 "offset_weight", "crop_trim"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

@@ -293,3 +293,39 @@ def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard
     for bad in ((8, 250), "400x250", (400,)):
         with pytest.raises(InputError, match="val_view"):
             replace(square, val_view=bad)
+
+
+def test_crop_trim_cuts_each_batch_to_one_drawn_size_off_the_same_crops(tmp_path):
+    """``crop_trim`` keeps the shard (its key), the windows and the crops; each step's batch is cut at
+    the bottom and right to one size drawn in crop - N .. crop; 0 leaves the batches as they were."""
+    from dataclasses import replace
+
+    from neuspike.train.__main__ import build_parser, spec_from_args
+
+    spec = tiny_spec(tmp_path, crop=16, batch=2)
+    trimmed = replace(spec, data=replace(spec.data, crop_trim=7))
+    assert trimmed.data.key(0) == spec.data.key(0)
+    bar = lambda **kw: type("Bar", (), {"update": lambda *a: None, "close": lambda *a: None})()  # noqa: E731
+    tasks = []
+    for s in (spec, trimmed):
+        trainer = Trainer(s, quiet=True)
+        trainer.task.prepare(bar)
+        tasks.append(trainer.task)
+    sizes = set()
+    for step in range(12):
+        (x0, t0), (x1, t1) = tasks[0].batch(step), tasks[1].batch(step)
+        h, w = t1.shape[-2:]
+        assert 9 <= h <= 16 and 9 <= w <= 16
+        sizes.add((h, w))
+        assert torch.equal(t1, t0[..., :h, :w])
+        for a, b in zip(x0, x1):
+            assert torch.equal(b, a[..., :h, :w] if a.shape[-1] > 1 else a)
+        assert torch.equal(tasks[1].batch(step)[1], t1)  # the same step draws the same size
+    assert len(sizes) > 3
+    assert tuple(tasks[0].batch(0)[1].shape[-2:]) == (16, 16)
+    for bad in (-1, 8, 2.5, True):
+        with pytest.raises(InputError, match="crop_trim"):
+            replace(spec.data, crop_trim=bad)
+    assert spec_from_args(build_parser().parse_args(["neuspike-net", "--crop-trim", "6"])).data.crop_trim == 6
+    with pytest.raises(InputError, match="crop-trim"):
+        spec_from_args(build_parser().parse_args(["e2vid", "--crop-trim", "6"]))
