@@ -137,6 +137,7 @@ class MotionGate(nn.Module):
         rows = p[..., :-2, :] + p[..., 1:-1, :] + p[..., 2:, :]
         total = rows[..., :-2] + rows[..., 1:-1] + rows[..., 2:]
         h, w = x.shape[-2:]
+
         def count(n: int) -> torch.Tensor:  # neighbours inside the image along one axis
             i = torch.arange(n, device=x.device)
             return 3.0 - (i == 0).float() - (i == n - 1).float()
