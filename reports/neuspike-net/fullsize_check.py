@@ -61,6 +61,19 @@ def trained_design(folder: str | None, method: str) -> dict[str, str]:
     return {k: trained[k] for k in ("head", "motion_gate") if k in trained}
 
 
+def probe_start(doc: str, argv: list[str] | None):
+    """The probes' common start (``size_probe.py``, ``padding_probe.py``): parse ``[FOLDER] [--threads N]``,
+    set the torch threads and build ``neuspike-net`` in float32 from the folder's weights with their
+    design (default: the shipped weights). Returns ``(args, method)``."""
+    p = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    return args, create("neuspike-net", weights_dir=args.folder, precision="float32",
+                        **trained_design(args.folder, "neuspike-net"))
+
+
 def _psnr(x: np.ndarray, truth: np.ndarray) -> float:
     return float(10 * np.log10(1.0 / max(float(np.mean((x - truth) ** 2)), 1e-12)))
 

@@ -13,15 +13,12 @@ same weights (its texture path alone). Default: the shipped weights.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 import torch
 
 from bench import grid as grids
-from fullsize_check import trained_design  # beside this script
+from fullsize_check import probe_start  # beside this script
 from neuspike.conditions import Condition
-from neuspike.methods import create
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
@@ -41,13 +38,7 @@ def _cut(inputs: list[torch.Tensor], where: tuple) -> list[torch.Tensor]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
-    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
-    args = p.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    method = create("neuspike-net", weights_dir=args.folder, precision="float32",
-                    **trained_design(args.folder, "neuspike-net"))
+    args, method = probe_start(__doc__, argv)
     net = method.module.eval()
     both = (lambda x: net(*x), lambda x: net.forward_texture_only(x[0], *x[2:]))
     for noise in ("high", "none"):

@@ -11,13 +11,10 @@ scene kind. Default: the shipped weights.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
-import torch
 
 from bench import grid as grids
-from fullsize_check import trained_design  # beside this script
+from fullsize_check import probe_start  # beside this script
 from neuspike.conditions import Condition
 from neuspike.methods import create
 from neuspike.metrics import psnr
@@ -29,13 +26,7 @@ KINDS = ("pan", "zoom", "fan", "still")
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
-    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
-    args = p.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    fusion = create("neuspike-net", weights_dir=args.folder, precision="float32",
-                    **trained_design(args.folder, "neuspike-net"))
+    args, fusion = probe_start(__doc__, argv)
     spike = create("neuspike-net-spike", weights_dir=args.folder, precision="float32")
     for size in ((400, 250), (128, 128)):
         for noise in ("none", "high"):
