@@ -251,8 +251,8 @@ class WindowTask:
       ``derive_rng(seed, "order", e)``) and crops/flips from ``derive_rng(seed, "augment", k)``.
     * **inputs**: the method's own :meth:`~neuspike.methods.learned.LearnedMethod.encode` (one step), the
       target the sample's ground truth (1, 1, H, W), cut by ``crop_trim`` where it is set; drawn and
-      augmented on the CPU, then moved to
-      the method's device (``method.device``), where the loss and the validation run.
+      augmented on the CPU, then moved to the method's device (``method.device``), where the loss and
+      the validation run.
     * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1)
       + ``offset_weight`` * the mean absolute error of each crop's mean level (0 by default).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
@@ -331,7 +331,7 @@ class WindowTask:
         if self.data.crop_trim:  # one size per batch: rows and columns cut off the bottom and right
             th, tw = (int(v) for v in derive_rng(spec.seed, "trim", step).integers(0, self.data.crop_trim + 1, size=2))
             h, w = spec.crop - th, spec.crop - tw
-            inputs = [[t[..., :h, :w] if t.shape[-1] > 1 else t for t in x] for x in inputs]
+            inputs = [[t[..., :h, :w] for t in x] for x in inputs]  # a (1, 1, 1, 1) quantum stays as it is
             targets = [y[..., :h, :w] for y in targets]
         return [torch.stack([x[k] for x in inputs]) for k in range(len(inputs[0]))], torch.stack(targets)
 

@@ -34,7 +34,7 @@ def _psnr(a: torch.Tensor, b: torch.Tensor) -> float:
 
 
 def _cut(inputs: list[torch.Tensor], where: tuple) -> list[torch.Tensor]:
-    return [t[(..., *where)] if t.shape[-1] > 1 else t for t in inputs]  # a (B, 1, 1, 1) quantum stays
+    return [t[(..., *where)] for t in inputs]  # a (B, 1, 1, 1) quantum stays as it is
 
 
 def main(argv: list[str] | None = None) -> int:
