@@ -19,7 +19,7 @@ from typing import Any, Sequence
 from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
-WINDOW_ONLY = ("val_windows", "spike_only_fraction", "workers", "speed_range", "val_view", "offset_weight",
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight",
                "scale_range", "crop_trim")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
 
@@ -112,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--spike-only-fraction", type=float,
                    help="single windows: fraction of steps training the spike-only variant of a fusion network "
                         "(default 0.3)")
-    d.add_argument("--workers", type=int, help="single windows: processes simulating windows (default 2)")
+    d.add_argument("--workers", type=int, help="processes simulating the shard (default: 2 for single windows, 1 for sequences); the "
+                        "same data whatever the count")
     d.add_argument("--val-view", metavar="WxH",
                    help="single windows: validate on windows of this size (e.g. 400x250, the sweeps' frame) "
                         "instead of the square training view, so the best step is chosen on whole frames")

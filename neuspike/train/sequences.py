@@ -162,39 +162,78 @@ def _item_path(folder: Path, split: str, index: int) -> Path:
     return folder / f"{split}-{index:05d}.npz"
 
 
+def _write_item(method: Any, data: SequenceData, seed: int, split: str, index: int, folder: Path) -> None:
+    """Simulate item ``index`` of ``split`` from ``derive_rng(seed, "sequences", split, index)`` (cells
+    redrawn until one gives enough events) and write it atomically."""
+    rng = derive_rng(seed, "sequences", split, index)
+    item = None
+    while item is None:
+        cell = draw_cell(data, rng)
+        try:
+            item = simulate_item(method, cell, data)
+        except ArithmeticError as exc:  # a simulator defect on this cell: recorded, the cell redrawn
+            with open(folder / "failures.txt", "a") as f:
+                f.write(f"{split} {index}: {type(exc).__name__}: {exc}: {cell!r}\n")
+    buf = io.BytesIO()
+    np.savez(buf, voxels=item.voxels, targets=item.targets, flow=item.flow, meta=np.array(json.dumps(item.meta)))
+    atomic.write_bytes(_item_path(folder, split, index), buf.getvalue())
+
+
+#: A shard worker's own method and data, built once per process by :func:`_start_worker`.
+_WORKER: dict[str, Any] = {}
+
+
+def _start_worker(spec_dict: dict[str, Any]) -> None:
+    from neuspike.train.loop import training_method
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.utils.parallel import set_threads
+
+    set_threads(1)
+    spec = spec_from_dict(spec_dict)
+    _WORKER["method"], _WORKER["data"] = training_method(spec, "cpu"), spec.data
+
+
+def _worker_item(job: tuple[int, str, int, str]) -> int:
+    seed, split, index, folder = job
+    _write_item(_WORKER["method"], _WORKER["data"], seed, split, index, Path(folder))
+    return index
+
+
 def build_shard(method: Any, data: SequenceData, *, seed: int, split: str, count: int, folder: Path,
-                bar_factory: Callable[..., Any] | None = None) -> list[Path]:
+                bar_factory: Callable[..., Any] | None = None, workers: int = 1,
+                spec: TrainSpec | None = None) -> list[Path]:
     """Simulate ``count`` items of ``split`` into ``folder`` (resumable: existing items are kept).
 
     Item ``i`` draws its cells from ``derive_rng(seed, "sequences", split, i)`` (redrawn until one gives
-    enough events), so the same seed gives the same bytes whatever was built before.
+    enough events), so the same seed gives the same items whatever was built before and however many
+    processes build them. ``workers`` > 1 simulates in that many fresh processes, each building its own
+    copy of ``spec``'s method on the CPU (``spec`` is then required); the items are the same as one
+    process's.
     """
     folder.mkdir(parents=True, exist_ok=True)
-    paths = []
-    todo = [i for i in range(count) if not _item_path(folder, split, i).is_file()]
-    bar = None
-    if bar_factory is not None and todo:
-        bar = bar_factory(total=len(todo), desc=f"simulating {split}", unit="seq")
-    for i in range(count):
-        path = _item_path(folder, split, i)
-        paths.append(path)
-        if path.is_file():
-            continue
-        rng = derive_rng(seed, "sequences", split, i)
-        item = None
-        while item is None:
-            cell = draw_cell(data, rng)
-            try:
-                item = simulate_item(method, cell, data)
-            except ArithmeticError as exc:  # a simulator defect on this cell: recorded, the cell redrawn
-                with open(folder / "failures.txt", "a") as f:
-                    f.write(f"{split} {i}: {type(exc).__name__}: {exc}: {cell!r}\n")
-        buf = io.BytesIO()
-        np.savez(buf, voxels=item.voxels, targets=item.targets, flow=item.flow,
-                 meta=np.array(json.dumps(item.meta)))
-        atomic.write_bytes(path, buf.getvalue())
-        if bar is not None:
-            bar.update(1)
+    paths = [_item_path(folder, split, i) for i in range(count)]
+    todo = [i for i, p in enumerate(paths) if not p.is_file()]
+    if not todo:
+        return paths
+    bar = bar_factory(total=len(todo), desc=f"simulating {split}", unit="seq") if bar_factory is not None else None
+    if workers <= 1 or len(todo) == 1:
+        for i in todo:
+            _write_item(method, data, seed, split, i, folder)
+            if bar is not None:
+                bar.update(1)
+    else:
+        if spec is None:
+            raise ValueError("build_shard: workers > 1 needs the spec, to build each worker's method")
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        jobs = [(seed, split, i, str(folder)) for i in todo]
+        # fresh processes (not forked): the parent may hold a CUDA context and torch's thread pools
+        with ProcessPoolExecutor(min(workers, len(todo)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_start_worker, initargs=(spec.as_dict(),)) as pool:
+            for _ in pool.map(_worker_item, jobs):
+                if bar is not None:
+                    bar.update(1)
     if bar is not None:
         bar.close()
     return paths
@@ -363,10 +402,9 @@ class SequenceTask:
 
     def prepare(self, bar_factory: Callable[..., Any]) -> None:
         data, folder = self.data, self.shard_dir
-        self.train_paths = build_shard(self.method, data, seed=self.spec.seed, split="train", count=data.train_items,
-                                       folder=folder, bar_factory=bar_factory)
-        self.val_paths = build_shard(self.method, data, seed=self.spec.seed, split="val", count=data.val_items,
-                                     folder=folder, bar_factory=bar_factory)
+        common = dict(seed=self.spec.seed, folder=folder, bar_factory=bar_factory, workers=data.workers, spec=self.spec)
+        self.train_paths = build_shard(self.method, data, split="train", count=data.train_items, **common)
+        self.val_paths = build_shard(self.method, data, split="val", count=data.val_items, **common)
         item = {k: v for k, v in json.loads(json.dumps(self.data.__dict__)).items() if k in SequenceData.KEY_FIELDS}
         atomic.write_text(folder / "data.json", json.dumps(item, indent=2) + "\n")
 

@@ -235,7 +235,8 @@ class SequenceData:
     is mapped to radiance through a drawn dynamic range of 10 to 1,000; the rest are linear in luma.
 
     ``shard_root`` holds one folder per :meth:`key`; ``train_items`` / ``val_items`` are the items
-    simulated. Scoring: ``length`` consecutive windows per training sequence, the first
+    simulated, by ``workers`` processes (not part of the key or the run's identity: the items are the
+    same whatever the count). Scoring: ``length`` consecutive windows per training sequence, the first
     ``warmup_windows`` of them only carry the state; loss ``l1 * |o - y| + ssim * (1 - SSIM) +
     temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``.
     """
@@ -258,6 +259,7 @@ class SequenceData:
     shard_root: str = "runs/shards"
     train_items: int = 300
     val_items: int = 16
+    workers: int = 1
     length: int = 8
     warmup_windows: int = 2
     l1: float = 1.0
@@ -293,6 +295,7 @@ class SequenceData:
         put(self, "threshold_range", (lo, hi))
         _whole("train_items", self.train_items, 1)
         _whole("val_items", self.val_items, 1)
+        _whole("workers", self.workers, 1)
         if not 1 <= self.length <= self.windows:
             raise InputError(f"length: expected 1..{self.windows} windows, got {self.length}")
         if not 0 <= self.warmup_windows < self.length:

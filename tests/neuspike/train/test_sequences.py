@@ -345,3 +345,27 @@ def test_hdr_fraction_sets_the_share_of_high_dynamic_range_items():
     assert DataSpec(hdr_fraction=0.5).key() == DataSpec().key() == "f40df6737f28" != DataSpec(hdr_fraction=0.0).key()
     with pytest.raises(InputError, match="hdr_fraction"):
         DataSpec(hdr_fraction=1.5)
+
+
+def test_a_shard_built_by_several_processes_holds_the_items_of_one(tmp_path):
+    """Item i draws from its own generator, so two worker processes write the items one process
+    writes (arrays and metadata; the zip's time stamps may differ); the count is no part of the run."""
+    from neuspike.train.__main__ import build_parser, spec_from_args
+    from neuspike.train.sequences import build_shard, load_shard
+
+    spec = _tiny_run(1, 1, tmp_path)
+    data = dataclasses.replace(spec.data, train_items=3)
+    method = training_method("firenet-sim")
+    one = build_shard(method, data, seed=0, split="train", count=3, folder=tmp_path / "one")
+    two = build_shard(method, dataclasses.replace(data, workers=2), seed=0, split="train", count=3,
+                      folder=tmp_path / "two", workers=2, spec=dataclasses.replace(spec, data=data))
+    assert [p.name for p in one] == [p.name for p in two] == ["train-00000.npz", "train-00001.npz", "train-00002.npz"]
+    a, b = load_shard(one), load_shard(two)
+    for k in a:
+        assert a[k].tobytes() == b[k].tobytes(), k
+    for p, q in zip(one, two):
+        assert str(np.load(p)["meta"]) == str(np.load(q)["meta"])
+    assert dataclasses.replace(spec, data=dataclasses.replace(spec.data, workers=4)).identity() == spec.identity()
+    assert spec_from_args(build_parser().parse_args(["e2vid", "--workers", "3"])).data.workers == 3
+    with pytest.raises(InputError, match="workers"):
+        dataclasses.replace(data, workers=0)
