@@ -22,6 +22,13 @@ from neuspike.methods.precision import PRECISIONS
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight",
                "scale_range", "crop_trim")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
+#: Flags that make a spec (refused beside --spec, which runs its file as written).
+SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
+              "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
+              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "crop_trim", "size", "view",
+              "length", "kinds", "hdr_fraction", "export_dir")
+#: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
+SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 
 #: Defaults of each data kind where they differ from :class:`TrainSpec`'s, and per method.
 KIND_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -62,8 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m neuspike.train", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("method", help="registered learned method (neuspike-net, e2vid, firenet-sim, ...)")
-    p.add_argument("--spec", help="run this spec.json (of this trainer or an earlier one); other flags are then "
-                                  "ignored except --out and --device")
+    p.add_argument("--spec", help="run this spec.json (of this trainer or an earlier one) as written: beside it only "
+                                  "--out, --device, --threads, --shard, --workers, --export, --no-export, --export-dir "
+                                  "and the run options apply; a flag that would change what it trains is refused")
     p.add_argument("--out", "--run-dir", dest="out", help="run folder (default runs/METHOD)")
     p.add_argument("--shard", "--shards", dest="shard",
                    help="folder of the simulated data (default runs/shard for windows, runs/shards for sequences)")
@@ -77,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "default: constant rate)")
     g.add_argument("--warmup", type=int, help="learning-rate warm-up steps (windows 200, sequences 50)")
     g.add_argument("--val-every", type=int, help="validate (and export a new best) every N steps")
-    g.add_argument("--seed", type=int, default=0, help="seed of data, order and initial weights (default 0)")
+    g.add_argument("--seed", type=int, help="seed of data, order and initial weights (default 0)")
     g.add_argument("--threads", type=int, help="torch threads (windows default 1; 1 when another job shares the CPU)")
     g.add_argument("--device", help="torch device to train on: cpu (default), or cuda, cuda:1, ... where torch sees "
                                     "a GPU (a device this machine lacks is refused before anything is simulated or "
@@ -171,11 +179,27 @@ def spec_from_args(args: argparse.Namespace):
     from neuspike.train.spec import SequenceData, TrainSpec, WindowData, load_spec, with_out_dir
 
     if args.spec:
+        given = [n for n in SPEC_FLAGS if n not in SPEC_OVERRIDES and getattr(args, n) is not None]
+        given += [n for n in ("param", "quick") if getattr(args, n)]
+        if given:
+            flags = ", ".join("--" + n.replace("_", "-") for n in given)
+            raise InputError(f"--spec runs {args.spec} as written; {flags} would change what it trains: edit the file "
+                             f"instead (beside a spec file only --out, --device, --threads, --shard, --workers, "
+                             f"--export, --no-export, --export-dir and the run options apply)")
+        if args.export and args.no_export:
+            raise InputError("--export and --no-export: choose one")
         spec = load_spec(args.spec, out_dir=args.out or f"runs/{args.method}")
         if spec.method != args.method:
             raise InputError(f"--spec {args.spec} trains {spec.method!r}, not {args.method!r}")
-        if args.device is not None:
-            spec = replace(spec, device=args.device)
+        top = {k: getattr(args, k) for k in ("device", "threads", "export_dir") if getattr(args, k) is not None}
+        if args.export or args.no_export:
+            top["export"] = bool(args.export)
+        data = {}
+        if args.shard is not None:
+            data["shard_dir" if spec.kind == "windows" else "shard_root"] = args.shard
+        if args.workers is not None:
+            data["workers"] = args.workers
+        spec = replace(spec, **top, **({"data": replace(spec.data, **data)} if data else {}))
         return with_out_dir(spec, args.out) if args.out else spec
     e = entry(args.method)
     kind = "sequences" if getattr(e.factory, "recurrent", False) else "windows"
@@ -231,7 +255,7 @@ def spec_from_args(args: argparse.Namespace):
         kw["export"] = False
     data = (WindowData if kind == "windows" else SequenceData)(**{k: kw.pop(k) for k in list(kw) if k in data_fields})
     out = args.out or f"runs/{args.method}" + ("-quick" if args.quick and kind == "sequences" else "")
-    return TrainSpec(method=args.method, data=data, out_dir=out, seed=args.seed, params=params,
+    return TrainSpec(method=args.method, data=data, out_dir=out, seed=0 if args.seed is None else args.seed, params=params,
                      export_dir=args.export_dir, **kw)
 
 
