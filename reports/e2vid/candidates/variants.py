@@ -3,7 +3,8 @@
 Registers ``e2vid-<name>`` for every candidate name: the ``e2vid`` network with the weights file
 ``e2vid-<name>.safetensors``, looked up in the sweep's ``--weights`` folder (the candidates are not
 shipped; see README.md beside this file). The names are ``E2VID_CANDIDATES`` (comma-separated) when
-that variable is set, otherwise the stages compared so far.
+that variable is set, otherwise the stages compared so far. ``E2VID_PRECISION`` (float32 or bfloat16),
+when set, fixes the candidates' precision (otherwise the ``auto`` choice of the machine).
 """
 
 import os
@@ -11,10 +12,12 @@ import os
 from baselines.e2vid import E2VID
 
 CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400", "s6-00600", "s7-00100", "s7-00200",
-              "s7-00300", "s7-00400", "s7-00500", "s7-00600")
+              "s7-00300", "s7-00400", "s7-00500", "s7-00600", "s8-00250", "s8-00500", "s8-00750")
 
 
 def register_methods(register):
     names = [n.strip() for n in os.environ.get("E2VID_CANDIDATES", "").split(",") if n.strip()] or CANDIDATES
+    precision = os.environ.get("E2VID_PRECISION")
+    params = {"normalize": True, **({"precision": precision} if precision else {})}
     for name in names:
-        register(f"e2vid-{name}", E2VID, params={"normalize": True}, weights=f"e2vid-{name}.safetensors")
+        register(f"e2vid-{name}", E2VID, params=params, weights=f"e2vid-{name}.safetensors")
