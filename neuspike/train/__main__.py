@@ -21,12 +21,12 @@ from neuspike.methods.precision import PRECISIONS
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight",
                "scale_range", "crop_trim")
-SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction")
+SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "crop_trim", "size", "view",
-              "length", "kinds", "hdr_fraction", "export_dir")
+              "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 
@@ -137,6 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--length", type=int, help="sequences: windows per training sequence (<= --windows)")
     d.add_argument("--kinds", metavar="K1,K2,...",
                    help="sequences: scene kinds drawn, from pan,zoom,fan,dead_leaves (default pan,zoom,fan)")
+    d.add_argument("--view-fraction", type=float, metavar="F",
+                   help="sequences, with --view: share of items cut from the view, the rest fitted whole (default 1)")
     d.add_argument("--hdr-fraction", type=float, metavar="F",
                    help="sequences: share of items with high-dynamic-range radiance (default 0.5)")
     o = p.add_argument_group("output and run")
@@ -219,7 +221,7 @@ def spec_from_args(args: argparse.Namespace):
     for name in top:
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
-    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
+    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction", "view_fraction",
                  "offset_weight", "crop_trim"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)

@@ -70,13 +70,16 @@ def draw_cell(data: SequenceData, rng: np.random.Generator) -> Cell:
     """A random cell of ``data`` (every draw from ``rng``)."""
     kind = str(rng.choice(data.kinds))
     photo = str(rng.choice(data.photos))
-    size = (data.size, data.size) if data.view is None else data.view
+    view = data.view
+    if view is not None and data.view_fraction < 1.0:  # drawn only then: earlier specs' draws are unchanged
+        view = view if rng.random() < data.view_fraction else None
+    size = (data.size, data.size) if view is None else view
     # linear when u < 1 - hdr_fraction: the default 0.5 draws exactly as before the field existed
     linear = rng.random() < 1.0 - data.hdr_fraction
     dynamic_range = None if linear else float(np.exp(rng.uniform(np.log(10), np.log(1000))))
     common: dict[str, Any] = dict(image=photo, size=size, dynamic_range=dynamic_range)
-    if data.view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
-        x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in data.view)
+    if view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
+        x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in view)
         common["crop"] = (x0, y0, data.size, data.size)
     if kind in ("pan", "dead_leaves"):
         angle = rng.uniform(0, 2 * np.pi)

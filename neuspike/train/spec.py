@@ -231,7 +231,8 @@ class SequenceData:
     ``view`` (width, height) or None: the scene view the photograph is fitted to. With a view, each
     item is a ``size`` x ``size`` crop of it at a random position, so the photographs are seen at
     the scale of an evaluation at that view size (the sweeps' 400x250); without one the whole
-    photograph is fitted to ``size`` x ``size``. ``hdr_fraction``: share of items whose photograph
+    photograph is fitted to ``size`` x ``size``. ``view_fraction`` (with a view): share of the items
+    cut from the view, the rest fitted whole (default 1: every item). ``hdr_fraction``: share of items whose photograph
     is mapped to radiance through a drawn dynamic range of 10 to 1,000; the rest are linear in luma.
 
     ``shard_root`` holds one folder per :meth:`key`; ``train_items`` / ``val_items`` are the items
@@ -244,7 +245,8 @@ class SequenceData:
     kind: ClassVar[str] = "sequences"
     #: Fields that say what an item is (the shard key); the others say how many and how they are scored.
     KEY_FIELDS: ClassVar[tuple[str, ...]] = ("size", "windows", "events_per_pixel", "threshold_range", "noise_levels",
-                                             "kinds", "photos", "displacement_px", "view", "hdr_fraction")
+                                             "kinds", "photos", "displacement_px", "view", "hdr_fraction",
+                                             "view_fraction")
 
     size: int = 128
     windows: int = 8
@@ -256,6 +258,7 @@ class SequenceData:
     displacement_px: float = 8.0
     view: tuple[int, int] | None = None
     hdr_fraction: float = 0.5
+    view_fraction: float = 1.0
     shard_root: str = "runs/shards"
     train_items: int = 300
     val_items: int = 16
@@ -289,6 +292,11 @@ class SequenceData:
             put(self, "view", (vw, vh))
         if not 0.0 <= self.hdr_fraction <= 1.0:
             raise InputError(f"hdr_fraction: expected a share in [0, 1], got {self.hdr_fraction}")
+        if not (isinstance(self.view_fraction, (int, float)) and 0.0 <= self.view_fraction <= 1.0):
+            raise InputError(f"view_fraction: expected a share in [0, 1], got {self.view_fraction!r}")
+        put(self, "view_fraction", float(self.view_fraction))
+        if self.view is None and self.view_fraction != 1.0:
+            raise InputError("view_fraction: a share of items cut from a view needs the view (e.g. 400x250)")
         lo, hi = (float(v) for v in self.threshold_range)
         if not 0 < lo <= hi:
             raise InputError(f"threshold_range: expected 0 < low <= high, got {self.threshold_range}")
@@ -304,7 +312,7 @@ class SequenceData:
     def key(self, seed: int | None = None) -> str:
         """The shard folder's name: a hash of what an item is (not of the seed, counts or scoring).
 
-        ``view`` and ``hdr_fraction`` are left out at their defaults, so shards made before those
+        ``view``, ``hdr_fraction`` and ``view_fraction`` are left out at their defaults, so shards made before those
         fields existed keep their key (the default data: ``f40df6737f28``).
         """
         d = {k: v for k, v in asdict(self).items() if k in self.KEY_FIELDS}
@@ -312,6 +320,8 @@ class SequenceData:
             del d["view"]
         if d["hdr_fraction"] == 0.5:
             del d["hdr_fraction"]
+        if d["view_fraction"] == 1.0:
+            del d["view_fraction"]
         text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 

@@ -369,3 +369,26 @@ def test_a_shard_built_by_several_processes_holds_the_items_of_one(tmp_path):
     assert spec_from_args(build_parser().parse_args(["e2vid", "--workers", "3"])).data.workers == 3
     with pytest.raises(InputError, match="workers"):
         dataclasses.replace(data, workers=0)
+
+
+def test_view_fraction_cuts_that_share_of_items_from_the_view_and_fits_the_rest():
+    """With ``view_fraction`` f, about f of the items are crops of the view and the others are the whole
+    photograph fitted to the item; at its default (1) the key and the draws are a view spec's own."""
+    view = DataSpec(size=40, windows=3, length=3, view=(160, 100), kinds=("pan",), noise_levels=("none",))
+    assert dataclasses.replace(view, view_fraction=1).key() == view.key()
+    rng_a, rng_b = np.random.default_rng(7), np.random.default_rng(7)
+    for _ in range(5):  # the default draws exactly as before the field existed
+        assert draw_cell(view, rng_a) == draw_cell(dataclasses.replace(view, view_fraction=1.0), rng_b)
+    mixed = dataclasses.replace(view, view_fraction=0.25)
+    assert mixed.key() not in (view.key(), dataclasses.replace(view, view=None).key())
+    rng = np.random.default_rng(0)
+    cells = [draw_cell(mixed, rng) for _ in range(400)]
+    cut = [c for c in cells if c.scene.crop is not None]
+    assert all(c.scene.size == (160, 100) and c.scene.crop[2:] == (40, 40) for c in cut)
+    assert all(c.scene.size == (40, 40) for c in cells if c.scene.crop is None)
+    assert abs(len(cut) / len(cells) - 0.25) < 0.07  # binomial sd 0.022
+    assert all(draw_cell(dataclasses.replace(view, view_fraction=0.0), rng).scene.crop is None for _ in range(20))
+    with pytest.raises(InputError, match="view_fraction"):
+        DataSpec(size=40, view_fraction=0.5)  # no view to cut from
+    with pytest.raises(InputError, match="view_fraction"):
+        dataclasses.replace(view, view_fraction=1.5)
