@@ -12,7 +12,8 @@ on those sequences (``validation_view.csv``, ``python reports/e2vid/validation.p
 The third panel is the measure weights are chosen by since stage 3: the sweep harness on training
 photographs (``candidates/results.csv``, mean SSIM over its 16 cells) for stage 2's weights and the
 snapshots of stages 5 and 6 (both from stage 2's weights), of stage 7 (from stage 6's step 200) and of
-stage 8 (from stage 7's step 300; its steps are larger: batch 8 of 112-pixel crops against 4 of 48), with
+stage 8 (from stage 7's step 300; its steps are larger: batch 8 of 112-pixel crops against 4 of 48) and of
+stage 9 (from stage 8's step 500), with
 the published FireNet for orientation.
 Writes training_curves.png.
 """
@@ -74,7 +75,8 @@ for prefix, start, label, color in (
         ("e2vid-s5-", ("e2vid-stage2", 0), "stage 5 (16-window sequences, dead leaves)", "C3"),
         ("e2vid-s6-", ("e2vid-stage2", 0), "stage 6 (linear radiance, clean x2; shipped at 200)", "C2"),
         ("e2vid-s7-", ("e2vid-s6-00200", 200), "stage 7 (16-window linear sequences, from stage 6's 200)", "C4"),
-        ("e2vid-s8-", ("e2vid-s7-00300", 500), "stage 8 (GPU: 4x the items, crop 112, batch 8; shipped at 500)", "C5")):
+        ("e2vid-s8-", ("e2vid-s7-00300", 500), "stage 8 (GPU: 4x the items, crop 112, batch 8)", "C5"),
+        ("e2vid-s9-", ("e2vid-s8-00500", 1000), "stage 9 (half the items cut from 400x250 views; shipped at 500)", "C6")):
     names = sorted(m for m in harness.index if m.startswith(prefix))
     steps = [start[1]] + [start[1] + int(m[len(prefix):]) for m in names]
     axh.plot(steps, [harness[start[0]]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
