@@ -120,8 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--spike-only-fraction", type=float,
                    help="single windows: fraction of steps training the spike-only variant of a fusion network "
                         "(default 0.3)")
-    d.add_argument("--workers", type=int, help="processes simulating the shard (default: 2 for single windows, 1 for sequences); the "
-                        "same data whatever the count")
+    d.add_argument("--workers", type=int,
+                   help="processes simulating the shard (default: 2 for single windows, 1 for sequences); the same "
+                        "data whatever the count")
     d.add_argument("--val-view", metavar="WxH",
                    help="single windows: validate on windows of this size (e.g. 400x250, the sweeps' frame) "
                         "instead of the square training view, so the best step is chosen on whole frames")
@@ -221,8 +222,8 @@ def spec_from_args(args: argparse.Namespace):
     for name in top:
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
-    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction", "view_fraction",
-                 "offset_weight", "crop_trim"):
+    for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
+                 "view_fraction", "offset_weight", "crop_trim"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:
@@ -257,8 +258,9 @@ def spec_from_args(args: argparse.Namespace):
         kw["export"] = False
     data = (WindowData if kind == "windows" else SequenceData)(**{k: kw.pop(k) for k in list(kw) if k in data_fields})
     out = args.out or f"runs/{args.method}" + ("-quick" if args.quick and kind == "sequences" else "")
-    return TrainSpec(method=args.method, data=data, out_dir=out, seed=0 if args.seed is None else args.seed, params=params,
-                     export_dir=args.export_dir, **kw)
+    seed = 0 if args.seed is None else args.seed
+    return TrainSpec(method=args.method, data=data, out_dir=out, seed=seed, params=params, export_dir=args.export_dir,
+                     **kw)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -288,12 +288,14 @@ def test_a_spec_file_runs_as_written_and_flags_that_would_change_it_are_refused(
     again = parse(f"neuspike-net --spec {path} --out {tmp_path / 'other'} --device cpu --max-minutes 3 --quiet")
     assert again.out_dir == str(tmp_path / "other") and again.identity() == spec.identity()
     # where it writes and on what it runs apply, and leave what it trains alone
-    moved = parse(f"neuspike-net --spec {path} --shard {tmp_path / 's'} --workers 3 --threads 2 --export-dir {tmp_path / 'e'}")
+    moved = parse(f"neuspike-net --spec {path} --shard {tmp_path / 's'} --workers 3 --threads 2 "
+                  f"--export-dir {tmp_path / 'e'}")
     assert (moved.data.shard_dir, moved.data.workers, moved.threads) == (str(tmp_path / "s"), 3, 2)
     assert moved.export_dir == str(tmp_path / "e")
     assert dataclasses.replace(moved, data=dataclasses.replace(moved.data, shard_dir=spec.data.shard_dir)).identity() \
         == spec.identity()
-    assert parse(f"neuspike-net --spec {path} --export").export and not parse(f"neuspike-net --spec {path} --no-export").export
+    assert parse(f"neuspike-net --spec {path} --export").export
+    assert not parse(f"neuspike-net --spec {path} --no-export").export
     for flags in ("--steps 5", "--batch 2 --lr 1e-3", "--seed 0", "--windows 6", "--crop-trim 2", "--param head=1",
                   "--quick"):
         with pytest.raises(InputError, match="as written") as err:
