@@ -76,7 +76,7 @@ for prefix, start, label, color in (
         ("e2vid-s6-", ("e2vid-stage2", 0), "stage 6 (linear radiance, clean x2; shipped at 200)", "C2"),
         ("e2vid-s7-", ("e2vid-s6-00200", 200), "stage 7 (16-window linear sequences, from stage 6's 200)", "C4"),
         ("e2vid-s8-", ("e2vid-s7-00300", 500), "stage 8 (GPU: 4x the items, crop 112, batch 8)", "C5"),
-        ("e2vid-s9-", ("e2vid-s8-00500", 1000), "stage 9 (half the items cut from 400x250 views; shipped at 500)", "C6")):
+        ("e2vid-s9-", ("e2vid-s8-00500", 1000), "stage 9 (half the items cut from 400x250 views; shipped at 400)", "C6")):
     names = sorted(m for m in harness.index if m.startswith(prefix))
     steps = [start[1]] + [start[1] + int(m[len(prefix):]) for m in names]
     axh.plot(steps, [harness[start[0]]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
