@@ -46,6 +46,7 @@ import torch
 from neuspike.errors import InputError
 from neuspike.methods.learned import resolve_device, resolve_precision, synchronize
 from neuspike.train import checkpoint as ck
+from neuspike.train.method import training_method
 from neuspike.train.spec import TrainSpec, WindowData, learning_rate
 from neuspike.utils.checks import check_positive_int
 from neuspike.utils.parallel import set_threads
@@ -54,22 +55,6 @@ __all__ = ["STALE_SHARD_S", "Trainer", "train", "training_method"]
 
 #: A shard's temporaries older than this are a killed run's (one item is written in well under a second).
 STALE_SHARD_S = 600.0
-
-
-def training_method(spec: TrainSpec, device: str | torch.device = "cpu"):
-    """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights),
-    its module on ``device`` (built on the CPU first, so the initial weights do not depend on the device)."""
-    from neuspike.methods.learned import LearnedMethod
-    from neuspike.methods import entry
-
-    e = entry(spec.method)
-    if not (isinstance(e.factory, type) and issubclass(e.factory, LearnedMethod)):
-        raise InputError(f"method {spec.method!r} is not a learned method; it cannot be trained")
-    want = "sequences" if e.factory.recurrent else "windows"
-    if spec.kind != want:
-        raise InputError(f"method {spec.method!r} trains on {want}, but the spec's data are {spec.kind}")
-    torch.manual_seed(spec.seed)
-    return e.factory.for_training(e.name, device=device, **{**dict(e.params), **spec.params})
 
 
 #: bfloat16 is chosen only when its measured step takes at most this fraction of float32's.

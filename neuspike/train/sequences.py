@@ -188,15 +188,13 @@ _WORKER: dict[str, Any] = {}
 
 def _start_worker(spec_dict: dict[str, Any]) -> None:
     """Build this process's method for encoding (its module's weights play no part in an item)."""
-    from neuspike.methods import entry
+    from neuspike.train.method import training_method
     from neuspike.train.spec import spec_from_dict
     from neuspike.utils.parallel import set_threads
 
     set_threads(1)
     spec = spec_from_dict(spec_dict)
-    e = entry(spec.method)
-    _WORKER["method"] = e.factory.for_training(e.name, device="cpu", **{**dict(e.params), **spec.params})
-    _WORKER["data"] = spec.data
+    _WORKER["method"], _WORKER["data"] = training_method(spec, "cpu"), spec.data
 
 
 def _worker_item(job: tuple[int, str, int, str]) -> int:
