@@ -23,7 +23,7 @@ from torch import nn
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
-from neuspike.nets.network import HEADS, MOTION_GATES, NeuSpikeNet
+from neuspike.nets.network import HEADS, MOTION_GATES, TRANSFORMERS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
                                            spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
@@ -33,9 +33,10 @@ from neuspike.nets.sliding import SlidingRepresentation
 __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod", "count_level"]
 
 #: The parameters that define the module and its inputs (recorded in the weights card and checked).
-ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head", "motion_gate")
+ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head", "motion_gate",
+                       "transformer")
 #: What an architecture parameter means when a weights card (written before it existed) lacks it.
-CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none"}
+CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
 #: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
@@ -83,6 +84,8 @@ def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError(f"motion_gate: expected one of {MOTION_GATES}, got {p['motion_gate']!r}")
     if p["spike_only"] and p["motion_gate"] != "none":
         raise InputError("motion_gate: the spike-only variant has no motion path to gate; use 'none'")
+    if p["transformer"] not in TRANSFORMERS:
+        raise InputError(f"transformer: expected one of {TRANSFORMERS}, got {p['transformer']!r}")
     return p
 
 
@@ -123,6 +126,9 @@ class NeuSpikeNetMethod(LearnedMethod):
     motion_gate : str
         ``"none"`` (the paper's) or ``"stats"``: gains on the motion features from the
         representations' statistics (:class:`~neuspike.nets.network.MotionGate`); fusion network only.
+    transformer : str
+        ``"fixed"`` (default; the shipped weights) or ``"learned"``: a learned full-resolution module on
+        each representation before its encoder (:class:`~neuspike.nets.network.InputTransformer`).
     level : str
         ``"counts"`` (default): the image is shifted so that its mean equals the mean radiance
         counted from the spikes (:func:`count_level`), where the sensor's gain and dark rate are
@@ -139,16 +145,17 @@ class NeuSpikeNetMethod(LearnedMethod):
 
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
-                 motion_gate: str = "none", level: str = "counts", **learned: Any) -> None:
+                 motion_gate: str = "none", transformer: str = "fixed", level: str = "counts", **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
-                           fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate))
+                           fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
+                           transformer=transformer))
         if level not in LEVELS:
             raise InputError(f"level: expected one of {LEVELS}, got {level!r}")
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
-                         level=level, **learned)
+                         transformer=transformer, level=level, **learned)
 
     # -- LearnedMethod ----------------------------------------------------------------------------
 
@@ -157,7 +164,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         p = self.params
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
                            event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"),
-                           motion_gate=p.get("motion_gate", "none"))
+                           motion_gate=p.get("motion_gate", "none"), transformer=p.get("transformer", "fixed"))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W), and with the

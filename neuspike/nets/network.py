@@ -47,6 +47,19 @@ Motion gate (``motion_gate``):
   coherent the events are beside the spikes. The MLP's last layer starts at zero, so
   ``g = 1`` and a network built from weights without the gate computes exactly what they computed.
 
+Input transformers (``transformer``; the paper's T_spike and T_event are learned modules of unknown form):
+
+* ``"fixed"`` (default): the representations enter the encoders and the input-level skip as computed
+  (:mod:`neuspike.nets.representations`).
+* ``"learned"``: each path first passes its representation through a learned full-resolution module,
+  ``x + conv1x1(relu(conv3x3(x)))`` (32 -> 32 -> 32 channels, 10,304 parameters a path), and the
+  result enters the encoder and the input-level skip. The strided first encoder layer means that,
+  without it, nothing non-linear runs at full resolution before the prediction layer. The
+  ``"support"`` heads still weigh the fixed spike representation (their basis of radiance
+  estimates), and the motion gate still sees the fixed statistics. The 1x1 layer starts at zero,
+  so the module is the identity at construction: weights trained with ``"fixed"`` load into a
+  ``"learned"`` network and compute exactly what they computed (``STARTS_AS_IDENTITY``).
+
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
 to ``F(t, 0) = t``, so the spike-only network is exactly the full one with the motion path silent,
@@ -63,7 +76,8 @@ from neuspike.errors import InputError
 from neuspike.nets.fusion import make_fusion
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
-__all__ = ["HEADS", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS", "pad_to_multiple"]
+__all__ = ["HEADS", "InputTransformer", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
+           "TRANSFORMERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
 PAPER_PARAMETERS = 5_985_000
@@ -74,6 +88,8 @@ MULTIPLE = 8
 HEADS = ("tanh", "support", "support-count")
 #: The motion gates (module docstring).
 MOTION_GATES = ("none", "stats")
+#: The input transformers (module docstring).
+TRANSFORMERS = ("fixed", "learned")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -148,6 +164,21 @@ class MotionGate(nn.Module):
         return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events)))
 
 
+class InputTransformer(nn.Module):
+    """A learned T: (B, C, H, W) -> (B, C, H, W), ``x + conv1x1(relu(conv3x3(x)))``; the identity at
+    construction (the 1x1 layer is zero)."""
+
+    def __init__(self, channels: int) -> None:
+        super().__init__()
+        self.mix = nn.Conv2d(channels, channels, 3, padding=1)
+        self.out = nn.Conv2d(channels, channels, 1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x + self.out(torch.relu(self.mix(x)))
+
+
 class NeuSpikeNet(nn.Module):
     """NeuSpike-Net (module docstring).
 
@@ -166,14 +197,20 @@ class NeuSpikeNet(nn.Module):
     motion_gate : str
         ``"none"`` or ``"stats"`` (:data:`MOTION_GATES`, module docstring); the spike-only network
         has no motion path and takes ``"none"`` only.
+    transformer : str
+        ``"fixed"`` or ``"learned"`` (:data:`TRANSFORMERS`, module docstring): a learned
+        full-resolution module on each representation before its encoder.
     """
 
     #: Parts that compute the identity as constructed: weights trained without them start the same network.
-    STARTS_AS_IDENTITY = ("motion_gate.",)
+    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.")
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
-                 event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none") -> None:
+                 event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none",
+                 transformer: str = "fixed") -> None:
         super().__init__()
+        if transformer not in TRANSFORMERS:
+            raise InputError(f"NeuSpikeNet: transformer must be one of {TRANSFORMERS}, got {transformer!r}")
         if head not in HEADS:
             raise InputError(f"NeuSpikeNet: head must be one of {HEADS}, got {head!r}")
         if motion_gate not in MOTION_GATES:
@@ -184,8 +221,13 @@ class NeuSpikeNet(nn.Module):
         self.spike_only = spike_only
         self.head = head
         self.event_skip_weight = float(event_skip_weight)
+        self.transformer = transformer
+        if transformer == "learned":
+            self.spike_transformer = InputTransformer(in_channels)
         self.texture = _Encoder(in_channels)
         if not spike_only:
+            if transformer == "learned":
+                self.event_transformer = InputTransformer(in_channels)
             self.motion = _Encoder(in_channels)
             self.fuse1 = make_fusion(fusion, ENCODER_CHANNELS[0])
             self.fuse2 = make_fusion(fusion, ENCODER_CHANNELS[1])
@@ -228,15 +270,15 @@ class NeuSpikeNet(nn.Module):
             if events.shape != spikes.shape:
                 raise InputError(f"NeuSpikeNet: events {tuple(events.shape)} and spikes {tuple(spikes.shape)} differ")
         h, w = spikes.shape[-2:]
-        t = self.texture(pad_to_multiple(spikes))
+        t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
         if self.spike_only:
-            return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
-        m = self.motion(pad_to_multiple(events))
+            return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w))
+        m = self.motion(pad_to_multiple(self._transform("event_transformer", events)))
         if hasattr(self, "motion_gate"):
             g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
             m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                            t[0] + self.event_skip_weight * m[0], t[0], quantum, (h, w))
+                            t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w))
 
     def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None) -> torch.Tensor:
         """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
@@ -246,8 +288,13 @@ class NeuSpikeNet(nn.Module):
         """
         self._check_inputs(spikes, quantum)
         h, w = spikes.shape[-2:]
-        t = self.texture(pad_to_multiple(spikes))
-        return self._decode(t[3], t[2], t[1], t[0], t[0], quantum, (h, w))
+        t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
+        return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w))
+
+    def _transform(self, name: str, x: torch.Tensor) -> torch.Tensor:
+        """The learned input transformer ``name`` applied to ``x``, or ``x`` (``"fixed"``)."""
+        module = getattr(self, name, None)
+        return x if module is None else module(x)
 
     def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None) -> None:
         if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:

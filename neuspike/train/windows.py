@@ -236,7 +236,7 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 
 
 #: Module tensors only the fusion network has (left out of the spike-only export).
-MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.")
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "event_transformer.")
 
 
 def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

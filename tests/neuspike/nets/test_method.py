@@ -218,6 +218,16 @@ def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tm
     assert DEFAULT_DESIGN["head"] == "support-count" == create("neuspike-net").module.head  # the shipped weights
 
 
+def test_cards_without_a_transformer_mean_the_fixed_representations(tmp_path):
+    """The shipped cards predate ``transformer``: they load as ``"fixed"`` and are refused by a method
+    built with learned transformers (whose tensors they lack)."""
+    assert create("neuspike-net").params["transformer"] == "fixed"
+    with pytest.raises(FormatError, match="transformer"):
+        create("neuspike-net", transformer="learned")
+    with pytest.raises(InputError, match="transformer"):
+        create("neuspike-net", transformer="learnt")
+
+
 def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
     """support-count's last input: 16 / (T * gain), the smallest step of the 16 group rates."""
     sample = make_sample(gain=0.25, period=7)

@@ -207,6 +207,40 @@ def test_motion_gate_scales_each_level_of_the_motion_path(one_torch_thread):
         NeuSpikeNet(spike_only=True, motion_gate="stats")
 
 
+def test_learned_input_transformers_start_as_the_fixed_network_and_keep_the_fixed_basis(one_torch_thread):
+    """``transformer="learned"`` adds x + conv1x1(relu(conv3x3(x))) on each path (10,304 parameters a
+    path, the 1x1 layer zero), so fixed weights load and give the same images; once it is not zero it
+    changes the encoders' input, while the support head still weighs the fixed rates (the output
+    stays a convex combination of them plus the correction)."""
+    from neuspike.methods.weights import load_state_strict
+
+    torch.manual_seed(5)
+    fixed = NeuSpikeNet(head="support-count", motion_gate="stats").eval()
+    learned = NeuSpikeNet(head="support-count", motion_gate="stats", transformer="learned").eval()
+    per_path = (9 * 32 * 32 + 32) + (32 * 32 + 32)
+    count = lambda net: sum(p.numel() for p in net.parameters())  # noqa: E731
+    assert count(learned) - count(fixed) == 2 * per_path == 20_608
+    spike = NeuSpikeNet(head="support-count", spike_only=True, transformer="learned")
+    assert count(spike) - count(NeuSpikeNet(head="support-count", spike_only=True)) == per_path
+    assert not hasattr(spike, "event_transformer")
+    load_state_strict(learned, fixed.state_dict(), "fixed", may_lack=learned.STARTS_AS_IDENTITY)
+    x, m, q = torch.rand(2, 32, 20, 36), torch.randn(2, 32, 20, 36), torch.full((2, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        for net in (fixed, learned):  # the support head's prediction layer starts at zero: give it weights
+            torch.manual_seed(6)
+            net.predict.weight.normal_(0, 0.05)
+        assert torch.equal(learned(x, m, q), fixed(x, m, q))
+        assert torch.equal(learned.forward_texture_only(x, q), fixed.forward_texture_only(x, q))
+        learned.spike_transformer.out.weight.normal_(0, 0.1)
+        assert not torch.allclose(learned(x, m, q), fixed(x, m, q))
+        # the prediction layer silenced: the support head gives the mean of the fixed rates, whatever T does
+        learned.predict.weight.zero_()
+        learned.predict.bias.zero_()
+        assert torch.allclose(learned(x, m, q), x.mean(dim=1, keepdim=True), atol=1e-6)
+    with pytest.raises(InputError, match="transformer"):
+        NeuSpikeNet(transformer="attention")
+
+
 def test_motion_gate_statistics_tell_incoherent_events_from_an_edge():
     """The 3x3 mean keeps 1/sqrt(3) of a straight edge's rms (three columns of 1/3) and about 1/3 of
     sparse isolated events' (nine pixels of 1/9)."""
