@@ -25,6 +25,11 @@ Loss, on every step after ``warmup_windows`` steps of each sequence (the state c
 exact flow, and ``M = valid * exp(-alpha * (y_k - warp(y_{k-1}))^2)`` masks pixels whose source is
 outside the frame or that the exact flow does not explain (occlusions, blades). SSIM is kornia's
 (Gaussian window 7, sigma 1.5).
+
+History term (``history`` > 0, default 0): the batch's last ``length - length // 2`` windows are run
+again from a zero state, and ``history * |o_last - o'_last|`` (the mean absolute difference of the
+two passes' last images) is added: an image after a long warm-up should not depend on where the
+history started (a new frame of a stream, a recording cut at any instant). It costs half a pass more.
 """
 
 from __future__ import annotations
@@ -426,6 +431,11 @@ class SequenceTask:
         batch = {k: v.to(self.device) for k, v in batch.items()}
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
         loss, parts = sequence_loss(outputs, batch, self.data)
+        if self.data.history > 0:
+            start = self.data.length // 2
+            short = run_sequence(self.module, batch["voxels"][start:], precision=self.precision)
+            gap = (outputs[-1].float() - short[-1].float()).abs().mean()
+            loss = loss + self.data.history * gap
         return loss, {**parts, "variant": "main"}
 
     def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:

@@ -239,7 +239,10 @@ class SequenceData:
     simulated, by ``workers`` processes (not part of the key or the run's identity: the items are the
     same whatever the count). Scoring: ``length`` consecutive windows per training sequence, the first
     ``warmup_windows`` of them only carry the state; loss ``l1 * |o - y| + ssim * (1 - SSIM) +
-    temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``.
+    temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``, plus
+    ``history`` times the gap between the last image and the same image from a second pass over the
+    last ``length - length // 2`` windows started from a zero state (0: off;
+    :mod:`neuspike.train.sequences`).
     """
 
     kind: ClassVar[str] = "sequences"
@@ -269,6 +272,7 @@ class SequenceData:
     ssim: float = 1.0
     temporal: float = 1.0
     occlusion_alpha: float = 50.0
+    history: float = 0.0
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -308,6 +312,10 @@ class SequenceData:
             raise InputError(f"length: expected 1..{self.windows} windows, got {self.length}")
         if not 0 <= self.warmup_windows < self.length:
             raise InputError(f"warmup_windows: expected 0..{self.length - 1}, got {self.warmup_windows}")
+        if not (isinstance(self.history, (int, float)) and math.isfinite(self.history) and self.history >= 0):
+            raise InputError(f"history: expected a weight >= 0, got {self.history!r}")
+        if self.history > 0 and self.length < 2:
+            raise InputError("history: the second pass needs sequences of at least 2 windows (length >= 2)")
 
     def key(self, seed: int | None = None) -> str:
         """The shard folder's name: a hash of what an item is (not of the seed, counts or scoring).

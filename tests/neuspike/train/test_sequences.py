@@ -18,6 +18,7 @@ from neuspike.scenes.motion import backward_flow, scene_time_s
 from neuspike.train.loop import train
 from neuspike.train.sequences import Cell, draw_cell, make_batch, run_sequence, sequence_loss, simulate_item, warp
 from neuspike.train.spec import SequenceData, TrainSpec, learning_rate
+from neuspike.utils.rng import derive_rng
 
 DataSpec = SequenceData
 
@@ -392,3 +393,33 @@ def test_view_fraction_cuts_that_share_of_items_from_the_view_and_fits_the_rest(
         DataSpec(size=40, view_fraction=0.5)  # no view to cut from
     with pytest.raises(InputError, match="view_fraction"):
         dataclasses.replace(view, view_fraction=1.5)
+
+
+def test_history_term_adds_the_gap_between_a_full_and_a_restarted_pass(tiny):
+    """``history`` w adds w * mean |o_last - o'_last|, o' from a second pass over the last
+    length - length // 2 windows started from zeros (computed here by hand); 0 leaves the loss alone;
+    a negative weight is refused."""
+    from neuspike.train.sequences import SequenceTask
+
+    _, _, method, item = tiny
+    torch.manual_seed(0)
+    trained = type(method).for_training("firenet-sim", normalize=True)
+    shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
+    losses = {}
+    for w in (0.0, 2.0):
+        data = DataSpec(size=40, windows=4, length=4, warmup_windows=1, history=w)
+        spec = TrainSpec(method="firenet-sim", data=data, out_dir="unused", crop=24, batch=1, steps=1,
+                         precision="float32", threads=None)
+        task = SequenceTask(spec, trained)
+        task.train_shard = shard
+        losses[w] = float(task.step_loss(0, lambda: None)[0].detach())
+    batch = make_batch(shard, derive_rng(0, "batch", 0),
+                       batch=1, crop=24, length=4)
+    with torch.no_grad():
+        full = run_sequence(trained.module, batch["voxels"], precision="float32")
+        short = run_sequence(trained.module, batch["voxels"][2:], precision="float32")
+    gap = float((full[-1] - short[-1]).abs().mean())
+    assert gap > 1e-4  # a fresh FireNet's image depends on its history
+    assert losses[2.0] - losses[0.0] == pytest.approx(2.0 * gap, rel=1e-4, abs=1e-6)
+    with pytest.raises(InputError, match="history"):
+        DataSpec(history=-1.0)
