@@ -12,6 +12,10 @@ allows) plus an additive correction counted in spikes per group and scaled by th
 quantum (:mod:`neuspike.nets.network`). The shipped fusion weights also have a motion gate (``motion_gate="stats"``): it scales the
 motion path at each level by gains computed from the representations' un-normalised statistics, so
 that noise-dominated events can be turned down (instance normalisation alone gives them full scale).
+``transformer="learned"`` adds a learned full-resolution module on each representation (the paper's
+learned T_spike and T_event, whose form is unknown here); against the fixed representations it did
+not win on validation (``reports/neuspike-net/README.md``, stage 21), so the shipped weights keep
+``"fixed"``.
 
 Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
 :mod:`neuspike.nets.fusion`), chosen by a short measured ablation: each candidate trained from the
