@@ -5,15 +5,19 @@ Registers ``e2vid-<name>`` for every candidate name: the ``e2vid`` network with 
 shipped; see README.md beside this file). The names are ``E2VID_CANDIDATES`` (comma-separated) when
 that variable is set, otherwise the stages compared so far. ``E2VID_PRECISION`` (float32 or bfloat16),
 when set, fixes the candidates' precision (otherwise the ``auto`` choice of the machine).
+
+``FIRENET_SIM_CANDIDATES`` (comma-separated, none by default) registers ``firenet-sim-<name>`` the
+same way: the FireNet module trained here (``firenet-sim``) with ``firenet-sim-<name>.safetensors``.
 """
 
 import os
 
 from baselines.e2vid import E2VID
+from baselines.firenet import FireNet
 
 CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400", "s6-00600", "s7-00100", "s7-00200",
               "s7-00300", "s7-00400", "s7-00500", "s7-00600", "s8-00250", "s8-00500", "s8-00750", "s9-00100",
-              "s9-00200", "s9-00300", "s9-00400", "s9-00500", "s9-00600")
+              "s9-00200", "s9-00300", "s9-00400", "s9-00500", "s9-00600", "s10-00100", "s10-00200", "s10-00300")
 
 
 def register_methods(register):
@@ -22,3 +26,5 @@ def register_methods(register):
     params = {"normalize": True, **({"precision": precision} if precision else {})}
     for name in names:
         register(f"e2vid-{name}", E2VID, params=params, weights=f"e2vid-{name}.safetensors")
+    for name in [n.strip() for n in os.environ.get("FIRENET_SIM_CANDIDATES", "").split(",") if n.strip()]:
+        register(f"firenet-sim-{name}", FireNet, params=params, weights=f"firenet-sim-{name}.safetensors")
