@@ -6,7 +6,7 @@ shipped; see README.md beside this file). The names are ``E2VID_CANDIDATES`` (co
 that variable is set, otherwise the stages compared so far. ``E2VID_PRECISION`` (float32 or bfloat16),
 when set, fixes the candidates' precision (otherwise the ``auto`` choice of the machine).
 
-``FIRENET_SIM_CANDIDATES`` (comma-separated, none by default) registers ``firenet-sim-<name>`` the
+``FIRENET_SIM_CANDIDATES`` (comma-separated; otherwise the ones scored so far) registers ``firenet-sim-<name>`` the
 same way: the FireNet module trained here (``firenet-sim``) with ``firenet-sim-<name>.safetensors``.
 """
 
@@ -19,6 +19,9 @@ CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400"
               "s7-00300", "s7-00400", "s7-00500", "s7-00600", "s8-00250", "s8-00500", "s8-00750", "s9-00100",
               "s9-00200", "s9-00300", "s9-00400", "s9-00500", "s9-00600", "s10-00100", "s10-00200", "s10-00300",
               "s11-00100", "s11-00200")
+#: The firenet-sim candidates scored so far (FIRENET_SIM_CANDIDATES picks among them and others).
+FIRENET_SIM_SCORED = ("fs1-shipped", "fs2-00500", "fs2-00750", "fs2-01000", "fs2-01250", "fs2-01500", "fs2-01750",
+                      "fs2-02000")
 
 
 def register_methods(register):
@@ -27,5 +30,6 @@ def register_methods(register):
     params = {"normalize": True, **({"precision": precision} if precision else {})}
     for name in names:
         register(f"e2vid-{name}", E2VID, params=params, weights=f"e2vid-{name}.safetensors")
-    for name in [n.strip() for n in os.environ.get("FIRENET_SIM_CANDIDATES", "").split(",") if n.strip()]:
+    firenet = [n.strip() for n in os.environ.get("FIRENET_SIM_CANDIDATES", "").split(",") if n.strip()]
+    for name in firenet or FIRENET_SIM_SCORED:
         register(f"firenet-sim-{name}", FireNet, params=params, weights=f"firenet-sim-{name}.safetensors")
