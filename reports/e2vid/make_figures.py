@@ -13,8 +13,8 @@ The third panel is the measure weights are chosen by since stage 3: the sweep ha
 photographs (``candidates/results.csv``, mean SSIM over its 16 cells) for stage 2's weights and the
 snapshots of stages 5 and 6 (both from stage 2's weights), of stage 7 (from stage 6's step 200) and of
 stage 8 (from stage 7's step 300; its steps are larger: batch 8 of 112-pixel crops against 4 of 48) and of
-stage 9 (from stage 8's step 500), with
-the published FireNet for orientation.
+stage 9 (from stage 8's step 500), of stage 10 (from stage 9's step 400) and of stage 11 (from stage
+10's step 200), with the published FireNet for orientation.
 Writes training_curves.png.
 """
 
@@ -43,7 +43,7 @@ def val(name: str, offset: int = 0) -> pd.DataFrame:
 
 fig, (ax, ax3, axh) = plt.subplots(1, 3, figsize=(16, 3.8))
 fs = val("firenet-sim_train_log.csv")
-ax.plot(fs.step, fs.val_ssim, "-", label="firenet-sim")
+ax.plot(fs.step, fs.val_ssim, "-", label="firenet-sim, stage 1")
 s1 = val("e2vid_train_log.csv")
 ax.plot(s1.step, s1.val_ssim, "-", label="e2vid, stage 1 (6-window sequences, lr 5e-4)")
 s2 = val("e2vid_stage2_train_log.csv", STAGE2_START)
@@ -60,7 +60,7 @@ if (here / "e2vid_stage3_train_log.csv").is_file():
     first = pd.DataFrame({"step": [STAGE3_START], "val_ssim": [STAGE2_VIEW_VAL_SSIM]})
     s3 = pd.concat([first, s3[["step", "val_ssim"]]])
     ax3.plot(s3.step, s3.val_ssim, "-o", ms=3, color="C1", label="e2vid, stage 3 (400x250 views, cosine lr; not shipped)")
-    for name, style, what in (("firenet-sim", "--", "shipped"), ("firenet", ":", "published")):
+    for name, style, what in (("firenet-sim", "--", "stage 1"), ("firenet", ":", "published")):
         ax3.axhline(start.loc[name, "val_ssim"], color="grey", ls=style, label=f"{name} ({what})")
     ax3.set_xlabel("optimiser step")
     ax3.set_ylabel("validation SSIM")
@@ -76,7 +76,9 @@ for prefix, start, label, color in (
         ("e2vid-s6-", ("e2vid-stage2", 0), "stage 6 (linear radiance, clean x2; shipped at 200)", "C2"),
         ("e2vid-s7-", ("e2vid-s6-00200", 200), "stage 7 (16-window linear sequences, from stage 6's 200)", "C4"),
         ("e2vid-s8-", ("e2vid-s7-00300", 500), "stage 8 (GPU: 4x the items, crop 112, batch 8)", "C5"),
-        ("e2vid-s9-", ("e2vid-s8-00500", 1000), "stage 9 (half the items cut from 400x250 views; shipped at 400)", "C6")):
+        ("e2vid-s9-", ("e2vid-s8-00500", 1000), "stage 9 (half the items cut from 400x250 views; 400 shipped)", "C6"),
+        ("e2vid-s10-", ("e2vid-s9-00400", 1400), "stage 10 (every window scored)", "C7"),
+        ("e2vid-s11-", ("e2vid-s10-00200", 1600), "stage 11 (history term; shipped at 200)", "C8")):
     names = sorted(m for m in harness.index if m.startswith(prefix))
     steps = [start[1]] + [start[1] + int(m[len(prefix):]) for m in names]
     axh.plot(steps, [harness[start[0]]] + [harness[m] for m in names], "-o", ms=4, color=color, label=label)
