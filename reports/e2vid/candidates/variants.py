@@ -21,7 +21,7 @@ CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400"
               "s11-00100", "s11-00200")
 #: The firenet-sim candidates scored so far (FIRENET_SIM_CANDIDATES picks among them and others).
 FIRENET_SIM_SCORED = ("fs1-shipped", "fs2-00500", "fs2-00750", "fs2-01000", "fs2-01250", "fs2-01500", "fs2-01750",
-                      "fs2-02000")
+                      "fs2-02000", "fs3-00200", "fs3-00400", "fs3-00600")
 
 
 def register_methods(register):
