@@ -221,7 +221,6 @@ class NeuSpikeNet(nn.Module):
         self.spike_only = spike_only
         self.head = head
         self.event_skip_weight = float(event_skip_weight)
-        self.transformer = transformer
         if transformer == "learned":
             self.spike_transformer = InputTransformer(in_channels)
         self.texture = _Encoder(in_channels)
