@@ -159,6 +159,15 @@ class Trainer:
             targets.append(Path(self.spec.export_dir))
         return targets
 
+    def _export_line(self) -> str:
+        """Where improving weights will be written, said before the first step: ``export`` replaces
+        the package's shipped weights, which a run meant as an experiment should not do."""
+        from neuspike.methods.weights import PACKAGE_WEIGHTS
+
+        folders = [str(p) + (" (the package's shipped weights: replaced)" if p == Path(PACKAGE_WEIGHTS) else "")
+                   for p in self._targets()]
+        return "best weights are exported to: " + "; ".join(folders)
+
     def export(self, variant: str, scores: dict[str, float], folders: list[Path]) -> None:
         name, state, params = self.task.exported(variant, self.spec.method)
         params = {k: v for k, v in params.items() if k not in ("weights_file", "precision")}  # not the design
@@ -245,6 +254,10 @@ class Trainer:
         self.task.load_validation()  # before choose_precision: timing a step needs the loaded data
         self.choose_precision()
         ck.trim_log(self.out, self.step)
+        if not self.quiet or spec.export:  # replacing the shipped weights is said even when quiet
+            from tqdm import tqdm
+
+            tqdm.write(self._export_line())
         if not resumed and spec.init_from is not None:
             # the starting weights set the bar: a later stage exports only what improves on them
             self.validate_and_export(force_bar=True)

@@ -329,3 +329,17 @@ def test_crop_trim_cuts_each_batch_to_one_drawn_size_off_the_same_crops(tmp_path
     assert spec_from_args(build_parser().parse_args(["neuspike-net", "--crop-trim", "6"])).data.crop_trim == 6
     with pytest.raises(InputError, match="crop-trim"):
         spec_from_args(build_parser().parse_args(["e2vid", "--crop-trim", "6"]))
+
+
+def test_the_run_says_where_it_exports_and_that_export_replaces_the_shipped_weights(tmp_path, capsys):
+    from neuspike.methods.weights import PACKAGE_WEIGHTS
+
+    trainer = Trainer(tiny_spec(tmp_path, export_dir=str(tmp_path / "out")), quiet=True)
+    line = trainer._export_line()
+    assert str(tmp_path / "run") in line and str(tmp_path / "out") in line and "replaced" not in line
+    package = Trainer(tiny_spec(tmp_path, export=True), quiet=True)._export_line()
+    assert f"{PACKAGE_WEIGHTS} (the package's shipped weights: replaced)" in package
+    trainer.run(until=0)  # quiet, and not into the package: nothing said
+    assert "best weights are exported to" not in capsys.readouterr().out
+    Trainer(tiny_spec(tmp_path, export_dir=str(tmp_path / "out")), quiet=False).run(until=0)
+    assert line in capsys.readouterr().out
