@@ -333,16 +333,18 @@ def cut_spike_window(sample: Any, planes: int) -> Any:
 # ----------------------------------------------------------------------------------------------
 
 def create_methods(names: Sequence[str], *, weights_dir: str | os.PathLike | None = None,
-                   device: str = "cpu", precision: str | None = None) -> dict[str, tuple[Any, str]]:
+                   device: str = "cpu", precision: str | None = None, compiled: bool = False
+                   ) -> dict[str, tuple[Any, str]]:
     """``{name: (method or None, reason)}``: each method created once by
     :func:`neuspike.methods.create_many`; a method that cannot be created gives ``None`` and
     ``"skipped: ..."`` (``MethodUnavailable``) or ``"error: ..."`` (anything else). Unknown names and
     an unusable device raise :class:`~neuspike.errors.InputError` before anything is built. ``precision``
-    (``None``: each method's own, ``"auto"`` for the learned ones) is given to every learned method."""
+    (``None``: each method's own, ``"auto"`` for the learned ones) and ``compiled`` are given to every learned
+    method."""
     from neuspike import methods as registry
 
     made = registry.create_many(list(names), weights_dir=weights_dir, device=device, precision=precision,
-                                keep_errors=True)
+                                compiled=compiled, keep_errors=True)
     out: dict[str, tuple[Any, str]] = {}
     for name, c in made.items():
         if c.unavailable is not None:
@@ -373,6 +375,8 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
     learned = method is not None and getattr(method, "module", None) is not None
     device = str(getattr(method, "device", "")) if learned else ""
     precision = str(method.params.get("precision", "")) if learned else ""
+    if learned and method.params.get("compiled"):
+        precision += ", compiled"
     return {"family": tb.family_of(ins), "inputs": "+".join(sorted(ins)), "parameters": params,
             "device": device, "precision": precision}
 
@@ -380,7 +384,7 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
 def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: int, warmup: int,
             history_windows: float = DEFAULT_HISTORY_WINDOWS, seed: int = 0,
             weights_dir: str | os.PathLike | None = None, device: str = "cpu", precision: str | None = None,
-            threads: int | None = None, log: Callable[[str], Any] | None = None) -> pd.DataFrame:
+            threads: int | None = None, compiled: bool = False, log: Callable[[str], Any] | None = None) -> pd.DataFrame:
     """Table 2 rows (:data:`TIMING_COLUMNS`): every method at every size.
 
     Each size's recording is simulated once (:func:`representative_sample`); each method is
@@ -392,7 +396,7 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
 
     repeats = check_count("repeats", repeats, 1)
     warmup = check_count("warmup", warmup, 0)
-    created = create_methods(names, weights_dir=weights_dir, device=device, precision=precision)
+    created = create_methods(names, weights_dir=weights_dir, device=device, precision=precision, compiled=compiled)
     needs = {m for name, (method, _) in created.items() if method is not None for m in method.inputs}
     learned = any(getattr(method, "module", None) is not None for method, _ in created.values())
     reference = None

@@ -118,6 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--precision", choices=PRECISIONS, default="auto",
                         help="precision of the learned methods (default: auto, bfloat16 only where a measured step "
                         "is faster than float32 on this device); the row's precision column says what ran")
+    parser.add_argument("--compile", action="store_true",
+                        help="run the learned methods' networks through torch.compile (weights frozen; compiled once per "
+                        "size in the untimed warm-up, 5-20 s each; needs a C++ compiler); the precision column says "
+                        "'compiled'")
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -152,6 +156,8 @@ def run(args: argparse.Namespace) -> Path:
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
+    if args.compile and warmup < 1:
+        raise InputError("--compile needs at least one warm-up call (--warmup 1 or more): the first call compiles")
     names = method_names(args.methods)
     from neuspike import methods as registry
 
@@ -179,7 +185,7 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "device": args.device, "precision": args.precision,
+                         "device": args.device, "precision": args.precision, "compiled": args.compile,
                          "weights": portable_path(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
@@ -189,6 +195,7 @@ def run(args: argparse.Namespace) -> Path:
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
                      weights_dir=weights, device=args.device, precision=args.precision, threads=args.threads,
+                     compiled=args.compile,
                      log=lambda s: (watch.read(), print(s, file=sys.stderr, flush=True)))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
     meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0, **watch.summary()}

@@ -321,8 +321,8 @@ def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, .
 
 
 def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.PathLike | None = None,
-                device: str = "cpu", precision: str | None = None, skip_unavailable: bool = True,
-                keep_errors: bool = False) -> dict[str, Created]:
+                device: str = "cpu", precision: str | None = None, compiled: bool = False,
+                skip_unavailable: bool = True, keep_errors: bool = False) -> dict[str, Created]:
     """Create each of ``names`` once, the way every front end does (commands, sweeps, timings).
 
     Every name is looked up and the device checked (:func:`check_device`) before anything is built,
@@ -337,6 +337,9 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
     precision : str or None
         The precision of every learned method (``"auto"``, ``"float32"`` or ``"bfloat16"``); ``None``
         keeps each entry's own. Methods that run on no torch device ignore it.
+    compiled : bool
+        Run every learned method's module through ``torch.compile`` (:class:`~neuspike.methods.learned.LearnedMethod`);
+        the others ignore it.
     skip_unavailable : bool
         ``True``: a method that cannot run here (:class:`MethodUnavailable`) is returned with
         ``unavailable`` set (a sweep's skipped row); ``False``: it raises :class:`MethodUnavailable`
@@ -368,6 +371,8 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
     out: dict[str, Created] = {}
     for name, e in zip(names, entries):
         extra = {"precision": precision} if precision is not None and uses_device(e) else {}
+        if compiled and uses_device(e):
+            extra["compiled"] = True
         try:
             out[name] = Created(name, create(name, weights_dir=weights_dir, device=device, **extra))
         except MethodUnavailable as exc:
