@@ -31,7 +31,7 @@ base owns what all of them share, written once:
   with its weights frozen as constants (inductor's ``freezing``: convolution weights prepacked once,
   normalisation and activations fused), built at the first step and recompiled once per input size
   and for a recurrent module's first (stateless) step. It pays where many frames of one size follow
-  (a sweep, a video, Table 2): on a 2-core AMD EPYC Genoa at 400x250, NeuSpike-Net's forward pass took
+  (offered by ``bench.timing --compile``; not yet by the sweeps or videos): on a 2-core AMD EPYC Genoa at 400x250, NeuSpike-Net's forward pass took
   286 -> 199 ms in float32 and 174 -> 108 ms in bfloat16, for 5-20 s of compiling once. Images agree
   with the eager module's within float rounding (float32: 1e-6 here). It needs the C++ compiler torch's
   inductor calls; where compiling fails, the step raises :class:`InputError` naming the cause. Recorded
@@ -123,11 +123,8 @@ def resolve_precision(precision: str, device: torch.device) -> str:
 def _compile_failure(exc: BaseException) -> bool:
     """Whether ``exc`` is torch.compile failing (no C++ compiler, a backend error), not the step itself."""
     from torch._dynamo.exc import TorchDynamoException
+    from torch._inductor.exc import CppCompileError
 
-    try:
-        from torch._inductor.exc import CppCompileError
-    except ImportError:  # another torch's layout: dynamo's own exceptions still say it
-        CppCompileError = TorchDynamoException  # noqa: N806
     return isinstance(exc, (TorchDynamoException, CppCompileError))
 
 
