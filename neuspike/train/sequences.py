@@ -92,9 +92,10 @@ def draw_cell(data: SequenceData, rng: np.random.Generator) -> Cell:
         velocity = (speed * np.cos(angle), speed * np.sin(angle))
         if kind == "pan":
             scene = SceneSpec("pan", velocity_px_s=velocity, **common)
-        else:  # procedural: no photograph; the layers' own draws come from the scene seed
-            scene = SceneSpec("dead_leaves", size=size, dynamic_range=dynamic_range, velocity_px_s=velocity,
-                              seed=int(rng.integers(0, 2**31 - 1)))
+        else:  # procedural: no photograph and no larger view to cut from, so drawn at the item's size;
+            # the layers' own draws come from the scene seed
+            scene = SceneSpec("dead_leaves", size=(data.size, data.size), dynamic_range=dynamic_range,
+                              velocity_px_s=velocity, seed=int(rng.integers(0, 2**31 - 1)))
     elif kind == "zoom":
         rate = float(rng.uniform(4.0, 20.0) * rng.choice([-1.0, 1.0]))
         focus = tuple(float(v) for v in rng.uniform(0.25, 0.75, 2) * (np.asarray(size) - 1))

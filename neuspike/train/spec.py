@@ -231,7 +231,8 @@ class SequenceData:
     ``view`` (width, height) or None: the scene view the photograph is fitted to. With a view, each
     item is a ``size`` x ``size`` crop of it at a random position, so the photographs are seen at
     the scale of an evaluation at that view size (the sweeps' 400x250); without one the whole
-    photograph is fitted to ``size`` x ``size``. ``view_fraction`` (with a view): share of the items
+    photograph is fitted to ``size`` x ``size``; dead-leaves items (procedural, no view to cut from)
+    are drawn at ``size`` x ``size`` either way. ``view_fraction`` (with a view): share of the items
     cut from the view, the rest fitted whole (default 1: every item). ``hdr_fraction``: share of items whose photograph
     is mapped to radiance through a drawn dynamic range of 10 to 1,000; the rest are linear in luma.
 
@@ -282,8 +283,6 @@ class SequenceData:
         if not kinds or not set(kinds) <= set(SEQUENCE_KINDS):
             raise InputError(f"kinds: expected a non-empty subset of {SEQUENCE_KINDS}, got {kinds}")
         put(self, "kinds", kinds)
-        if self.view is not None and "dead_leaves" in kinds:
-            raise InputError("view: dead_leaves scenes do not render a crop of a larger view; drop one of the two")
         if self.size < 16 or self.windows < 2:
             raise InputError(f"size >= 16 and windows >= 2 expected, got {self.size}, {self.windows}")
         if self.view is not None:

@@ -272,7 +272,7 @@ def test_a_view_spec_cuts_items_from_the_larger_view_and_leaves_old_shard_keys_a
 def test_dead_leaves_items_flow_with_the_background_and_the_mask_takes_the_foreground():
     """A dead-leaves cell: its flow is the background layer's translation, so warping the background
     layer alone reproduces its later frame (the foreground shapes are left to the loss's occlusion
-    mask); the item simulates; a view with dead leaves and an unknown kind are refused."""
+    mask); the item simulates, also beside a view; an unknown kind is refused."""
     from neuspike.scenes.dead_leaves import DeadLeavesScene
 
     data = DataSpec(size=48, windows=3, length=3, kinds=("dead_leaves",), noise_levels=("none",))
@@ -292,8 +292,13 @@ def test_dead_leaves_items_flow_with_the_background_and_the_mask_takes_the_foreg
     assert err < 0.25 * np.abs(_interior(b0 - b1, 8)).mean()
     item = simulate_item(training_method("firenet-sim"), cell, data)
     assert item is not None and item.meta["scene"] == "dead_leaves" and item.meta["photo"] is None
-    with pytest.raises(InputError, match="dead_leaves"):
-        DataSpec(size=48, kinds=("pan", "dead_leaves"), view=(160, 100))
+    # beside a view (which photographs are cut from), dead-leaves cells are drawn at the item size
+    viewed = DataSpec(size=48, windows=3, length=3, kinds=("dead_leaves",), noise_levels=("none",), view=(160, 100))
+    leaves = draw_cell(viewed, np.random.default_rng(7))
+    assert leaves.scene.kind == "dead_leaves" and leaves.scene.size == (48, 48) and leaves.scene.crop is None
+    leaves_item = simulate_item(training_method("firenet-sim"), leaves, viewed)
+    assert leaves_item is not None and leaves_item.targets.shape[-2:] == (48, 48)
+    assert leaves_item.flow.shape[-2:] == (48, 48)
     with pytest.raises(InputError, match="kinds"):
         DataSpec(kinds=("pan", "video"))
 
