@@ -225,6 +225,7 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "",
     methods = list(points["method"])
     styles = method_styles(methods, dict(zip(points["method"], points["family"])), tfp_windows)
     fig, axes = plt.subplots(1, 2, figsize=(14.5, 5.6), squeeze=False)
+    keys: list[Any] = []  # the marks' key, once below both panels
     for ax, metric in zip(axes[0], ("psnr", "ssim")):
         pts = points[np.isfinite(points["ms_per_frame"].to_numpy(float)) & np.isfinite(points[metric].to_numpy(float))
                      & (points["ms_per_frame"].to_numpy(float) > 0)]
@@ -247,9 +248,18 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "",
                 ax.scatter([stream], [getattr(r, metric)], facecolors="none", edgecolors=st["color"],
                            marker=st["marker"], s=40, linewidths=1.2, zorder=3)
                 streamed = True
+        # the key: points are named beside them, so the legend explains only the marks
+        from matplotlib.lines import Line2D
+
+        key = []
+        if len(front):
+            key.append(Line2D([], [], color="#333333", lw=1.2, alpha=0.7, label="Pareto front"))
         if streamed:
-            ax.scatter([], [], facecolors="none", edgecolors="#555555", marker="o", s=40,
-                       label="hollow: streaming, one new frame of a running video (filled: cold start)")
+            key += [Line2D([], [], ls="none", marker="o", color="#555555", markersize=6,
+                           label="filled: cold start (one call; recurrent: warm-up over the event history)"),
+                    Line2D([], [], ls="none", marker="o", markerfacecolor="none", markeredgecolor="#555555",
+                           markersize=6, label="hollow: streaming (one new frame of a running video)")]
+        keys = key or keys
         ax.set_xscale("log")
         ax.set_xlabel("ms per frame (log scale)")
         ax.set_ylabel(METRIC_LABELS[metric])
@@ -265,8 +275,13 @@ def accuracy_time_figure(points: pd.DataFrame, note: str = "",
             ax.set_ylim(ys.min() - pad, ys.max() + pad)
             _label_points(ax, pts["ms_per_frame"].to_numpy(float), ys, list(pts["method"]),
                           [styles[m]["color"] for m in pts["method"]])
-    fig.suptitle("Accuracy against time" + (f"\n{note}" if note else ""), fontsize=11)
-    fig.tight_layout(rect=(0, 0, 1, 0.93 if note else 0.96))
+    import textwrap
+
+    lines = textwrap.wrap(note, 170) if note else []  # a long note wraps instead of running off the page
+    fig.suptitle("\n".join(["Accuracy against time", *lines]), fontsize=11)
+    if keys:
+        fig.legend(handles=keys, loc="lower center", ncol=len(keys), fontsize=8.5, frameon=False)
+    fig.tight_layout(rect=(0, 0.05 if keys else 0, 1, 0.97 - 0.04 * len(lines)))
     return fig
 
 

@@ -310,7 +310,8 @@ def _accuracy_note(inputs: ReportInputs) -> str:
         src = sorted({Path(r).name for r in inputs.accuracy.get("results", pd.Series(dtype=str)).astype(str)
                       if r not in ("", "nan")})
         return (f"PSNR/SSIM: means of the sweep results in {', '.join(src) or '?'}; ms per frame: bench.timing at "
-                f"{', '.join(res) or '?'} (recurrent methods: per network step)")
+                f"{', '.join(res) or '?'} (filled: one reconstruct call, a streaming method's warm-up over its "
+                "event history included; hollow: one new frame of a running video)")
     return ("PSNR/SSIM: means over every cell; ms per frame: median wall time of one reconstruct call in the sweep "
             "(recurrent methods: including their warm-up)")
 

@@ -226,7 +226,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     import pandas as pd
     import torch
 
-    from bench.provenance import collect, finish, now_iso
+    from bench.provenance import LoadWatch, collect, finish, now_iso
     from neuspike.utils.atomic import write_text
     from neuspike.methods import available
     from neuspike.video import frame_times, open_recording
@@ -238,8 +238,9 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     out = check_writable(out)
     _apply_threads(spec)
     run_meta = collect(executor={"kind": "in-process"}, threads_per_worker=torch.get_num_threads(),
-                       start=now_iso(), contended=False)
+                       start=now_iso(), contended=None)
     load_start = _load_average()
+    watch = LoadWatch(torch.get_num_threads())  # other jobs' load, read after every method
     with tempfile.TemporaryDirectory(prefix="video-bench-") as tmp:
         folder = Path(cache) if cache is not None else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
@@ -262,6 +263,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
                 if bar is not None:
                     bar.set_postfix_str(name)
                 rows.append(measure_method(name, rec, times, truth, spec, weights_dir))
+                watch.read()
                 r = rows[-1]
                 shown = (f"{r['frames_per_s']:.1f} frames/s, PSNR {r['mean_psnr_db']:.2f} dB" if r["status"] == "ok"
                          else r["error"])
@@ -277,7 +279,10 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
         frame.to_csv(tmp_csv, index=False, float_format="%.6g")
     run_meta = finish(run_meta, load_average_start=load_start, load_average_end=_load_average(), simulation_s=sim_s,
                       recording=meta.get("scene"), event_count=meta.get("event_count"),
-                      spike_count=meta.get("spike_count"), torch_threads=torch.get_num_threads())
+                      spike_count=meta.get("spike_count"), torch_threads=torch.get_num_threads(),
+                      **watch.summary())
+    if run_meta["timing_contended"]:
+        print("note: timings contended: " + "; ".join(run_meta["contention"]), file=sys.stderr)
     write_text(out / "metadata.json", json.dumps({"spec": asdict(spec), "run": run_meta}, indent=2, default=str) + "\n")
     write_text(out / "README.md", markdown(frame, spec, run_meta))
     plot(out / "results.csv", out / "accuracy_vs_speed.png")
@@ -292,6 +297,16 @@ def _load_average() -> list[float] | None:
         return [round(v, 2) for v in os.getloadavg()]
     except (AttributeError, OSError):
         return None
+
+
+def _contention_sentence(run_meta: dict[str, Any]) -> str:
+    """What the page says about other jobs' load (:class:`bench.provenance.LoadWatch`'s verdict)."""
+    contended = run_meta.get("timing_contended")
+    if contended:
+        return " **Timings contended**: " + "; ".join(run_meta.get("contention", [])) + ", so frames/s is lower than quiet."
+    if contended is None:
+        return " Whether other jobs shared the machine is unknown (no load average here)."
+    return f" Timings uncontended (other jobs' load at most {run_meta.get('other_load', 0.0):.2f})."
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -316,7 +331,7 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"
         + (" --full" if spec.duration_s >= 1.0 else "") + (f" --device {spec.device}" if spec.device != "cpu" else "")
-        + "`.",
+        + "`." + _contention_sentence(run_meta),
         "",
         "| method | inputs | frames/s | real-time factor | PSNR (dB) | SSIM | flicker | steps/frame | threads | note |",
         "|---|---|---|---|---|---|---|---|---|---|",

@@ -307,6 +307,24 @@ def test_table_2_and_the_chart_label_the_cold_start_and_the_streaming_cost():
     assert "**cold start**" in md and "| e2vid | 32x24 | 400 (16 steps) | 50 [45-60] (2.0 steps) | 8.0x |" in md
     joined = timer.join_accuracy(results_for({"e2vid": 12.0}), frame, "runs/x").set_index("method")
     assert joined.loc["e2vid", "ms_per_frame"] == 400.0 and joined.loc["e2vid", "stream_ms"] == 50.0
+    # the chart: the streaming cost drawn hollow at 50 ms beside the filled cold start at 400, and a key
+    # below the panels that says which is which
+    from bench import figures
+
+    points = tb.with_fronts(joined.reset_index()[["method", "family", "ms_per_frame", "psnr", "ssim", "stream_ms"]])
+    fig = figures.accuracy_time_figure(points, note="a note " * 40)
+    try:
+        texts = [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+        assert any(t.startswith("filled: cold start") for t in texts)
+        assert any(t.startswith("hollow: streaming") for t in texts)
+        hollow = [c for c in fig.axes[0].collections if len(c.get_offsets()) == 1
+                  and len(c.get_facecolors()) == 0]
+        assert [float(c.get_offsets()[0][0]) for c in hollow] == [50.0]
+        assert max(len(line) for line in fig._suptitle.get_text().splitlines()) <= 170  # the long note wraps
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
 
 
 def test_measure_runs_learned_methods_in_the_precision_asked_and_says_so(test_methods):

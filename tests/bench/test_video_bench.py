@@ -77,3 +77,24 @@ def test_a_learned_methods_row_names_the_device_it_ran_on(bench_run):
         rows = {name: vb.measure_method(name, rec, times, truth, spec, None) for name in ("firenet-sim", "tfp")}
     assert rows["firenet-sim"]["status"] == "ok" and rows["firenet-sim"]["device"] == "cpu"
     assert rows["tfp"]["status"] == "ok" and rows["tfp"]["device"] is None  # a classical method has none
+
+
+def test_other_jobs_load_marks_the_timings_contended(bench_run, tmp_path, monkeypatch):
+    """With other jobs' load beyond the run's own threads (a load average read as 3 on a run of 1
+    thread) the run is marked contended in its metadata and on its page; a quiet reading is not."""
+    import bench.provenance as provenance
+
+    argv, _, _ = bench_run
+    for load, contended in ((3.0, True), (0.0, False)):
+        monkeypatch.setattr(provenance, "load_1min", lambda load=load: load)
+        out = tmp_path / f"out-{load:g}"
+        args = list(argv)
+        args[args.index("--methods") + 1] = "tfp"
+        args[args.index("--out") + 1] = str(out)
+        assert vb.main(args + ["--threads", "1"]) == 0
+        run = json.loads((out / "metadata.json").read_text())["run"]
+        page = (out / "README.md").read_text()
+        assert run["timing_contended"] is contended
+        assert ("Timings contended" in page) is contended
+        if not contended:
+            assert "Timings uncontended" in page
