@@ -593,16 +593,22 @@ def timing_markdown(timing: pd.DataFrame, threads: Any = None, machine: str = ""
         counted = numeric[numeric["gflop_per_step"].notna()]
     if len(counted):
         ref = float(counted["matmul_gflop_s"].iloc[0])
-        lrows = [[r.method, r.resolution, f"{r.gflop_per_step:.2f}", fmt(r.ms_per_frame, "ms"), fmt(r.flop_bound_ms, "ms"),
-                  f"{r.gflop_s:.1f}", f"{100.0 * r.gflop_s / r.matmul_gflop_s:.0f} %"] for r in counted.itertuples()]
+        # a timing.csv written before the representations were timed has no encode_ms: shown as "-"
+        enc = pd.to_numeric(counted["encode_ms"], errors="coerce") if "encode_ms" in counted else \
+            pd.Series(math.nan, index=counted.index)
+        lrows = [[r.method, r.resolution, f"{r.gflop_per_step:.2f}", fmt(r.ms_per_frame, "ms"), fmt(e, "ms"),
+                  fmt(r.flop_bound_ms, "ms"), f"{r.gflop_s:.1f}", f"{100.0 * r.gflop_s / r.matmul_gflop_s:.0f} %"]
+                 for r, e in zip(counted.itertuples(), enc)]
         parts.append("\nThe networks against this machine's limit: GFLOP per network step (counted by torch's FLOP "
-                     "counter: convolutions and matrix products), the measured ms per frame, the FLOP-bound time "
+                     "counter: convolutions and matrix products), the measured ms per frame, the part of it spent "
+                     "building the network's inputs on the CPU (a feed-forward method's representations; a "
+                     "recurrent method's voxel grid, per step), the FLOP-bound time "
                      f"(GFLOP at the rate of a float32 matrix product measured in the same run: {ref:.1f} GFLOP/s) "
                      "and the rate achieved (a feed-forward method's time includes building its input "
                      "representations):\n\n"
-                     + markdown_table(["method", "resolution", "GFLOP / step", "ms / frame", "FLOP-bound ms",
-                                       "GFLOP/s", "of the matmul rate"], lrows,
-                                      ["l", "l", "r", "r", "r", "r", "r"]))
+                     + markdown_table(["method", "resolution", "GFLOP / step", "ms / frame", "inputs ms",
+                                       "FLOP-bound ms", "GFLOP/s", "of the matmul rate"], lrows,
+                                      ["l", "l", "r", "r", "r", "r", "r", "r"]))
     streamed = timing.iloc[:0]
     if len(timing) and "stream_ms" in timing:
         numeric = timing.assign(**{c: pd.to_numeric(timing[c], errors="coerce")

@@ -35,7 +35,8 @@ LIGHT, MOTION, PLANES = 0.25, 128, 256
 TIMING_COLUMNS = ("method", "family", "inputs", "resolution", "width", "height", "status", "error", "threads",
                   "device", "precision", "parameters", "warmup", "repeats", "median_ms", "min_ms", "max_ms", "q1_ms",
                   "q3_ms", "steps", "ms_per_frame", "min_frame_ms", "max_frame_ms", "gflop_per_step", "gflop_s", "flop_bound_ms",
-                  "matmul_gflop_s", "cold_ms", "stream_ms", "stream_min_ms", "stream_max_ms", "stream_steps")
+                  "matmul_gflop_s", "cold_ms", "stream_ms", "stream_min_ms", "stream_max_ms", "stream_steps",
+                  "encode_ms")
 #: Output rate of the running video a streaming method is timed on (frames per second of sensor time).
 STREAM_FPS = 1000.0
 #: Side of the square float32 matrix product whose rate is the machine's reference (GFLOP/s).
@@ -67,6 +68,19 @@ def step_gflop(method: Any, sample: Any) -> float | None:
         return None
     inputs = tuple(t.to(method.device) for t in steps[0])
     return count_module_gflop(module, inputs, recurrent=bool(getattr(method, "recurrent", False)))
+
+
+def encode_ms(method: Any, sample: Any, *, repeats: int, warmup: int) -> float:
+    """Median ms of building a learned method's network inputs from ``sample`` (``method.encode``: a
+    feed-forward method's representations, part of its time per frame; a recurrent method's voxel
+    grids of the whole event history, divided by their count: per network step, as its time is)."""
+    count = [1]
+
+    def build() -> None:
+        count[0] = max(1, len(method.encode(sample)))
+
+    stats = time_callable(build, repeats=repeats, warmup=warmup)
+    return stats.median_ms / (count[0] if getattr(method, "recurrent", False) else 1)
 
 
 def matmul_gflop_s(side: int = MATMUL_SIDE, repeats: int = 3, device: str = "cpu") -> float:
@@ -444,11 +458,14 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
                         # recurrent methods: ms per network step; others: the whole call, encoding included
                         row.update(gflop_per_step=gflop, gflop_s=gflop / (row["ms_per_frame"] / 1000.0),
                                    flop_bound_ms=gflop / reference * 1000.0, matmul_gflop_s=reference)
+                        row["encode_ms"] = encode_ms(method, sample, repeats=repeats, warmup=min(warmup, 1))
                 except Exception as exc:
                     row.update(status="error", error=one_line(exc))
             if log:
                 stream = (f"; streaming {row['stream_ms']:.3g} ms per new frame"
                           if row["status"] == "ok" and not math.isnan(row["stream_ms"]) else "")
+                if row["status"] == "ok" and not math.isnan(row["encode_ms"]):
+                    stream += f"; building its inputs {row['encode_ms']:.3g} ms"
                 log(f"{res} {name}: " + (f"{row['ms_per_frame']:.3g} ms per frame{stream}" if row["status"] == "ok"
                                           else f"{row['status']} ({row['error']})"))
             rows.append(row)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import time
 
 import numpy as np
 import pandas as pd
@@ -269,8 +270,28 @@ def test_flops_are_counted_against_a_closed_form_and_a_network_is_read_against_t
     assert net["flop_bound_ms"] == pytest.approx(net["gflop_per_step"] / net["matmul_gflop_s"] * 1000)
     assert net["gflop_s"] == pytest.approx(net["gflop_per_step"] / net["ms_per_frame"] * 1000)
     assert math.isnan(classical["gflop_per_step"])  # no network, nothing counted
+    assert net["encode_ms"] > 0 and math.isnan(classical["encode_ms"])  # the inputs' time: learned methods only
     md = tb.timing_markdown(frame)
-    assert "FLOP-bound ms" in md and "| firenet-sim | 32x24 |" in md
+    assert "FLOP-bound ms" in md and "inputs ms" in md and "| firenet-sim | 32x24 |" in md
+    old = frame.drop(columns=["encode_ms"])  # a timing.csv from before the column still renders
+    assert "| firenet-sim | 32x24 |" in tb.timing_markdown(old)
+
+
+def test_the_inputs_time_is_per_step_for_a_recurrent_method():
+    """``encode_ms`` divides a recurrent method's encoding of the whole history by its step count
+    (its time per frame is per step), and leaves a feed-forward method's whole."""
+
+    class Fake:
+        def __init__(self, recurrent):
+            self.recurrent = recurrent
+
+        def encode(self, sample):
+            time.sleep(0.004)
+            return [None] * 4
+
+    whole = timer.encode_ms(Fake(False), None, repeats=3, warmup=0)
+    per_step = timer.encode_ms(Fake(True), None, repeats=3, warmup=0)
+    assert whole >= 4.0 and per_step >= 1.0 and per_step < whole / 2
 
 
 class FakeStreaming(FakeRecurrent):
