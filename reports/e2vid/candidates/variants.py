@@ -1,4 +1,5 @@
-"""Plug-in for choosing between trained ``e2vid`` weights on validation scenes (training photographs only).
+"""Plug-in for choosing between trained ``e2vid`` weights on validation scenes (training photographs,
+and from stage 13 two held-out dead-leaves pictures made by ``leaves.py``; never the test photographs).
 
 Registers ``e2vid-<name>`` for every candidate name: the ``e2vid`` network with the weights file
 ``e2vid-<name>.safetensors``, looked up in the sweep's ``--weights`` folder (the candidates are not
@@ -18,7 +19,8 @@ from baselines.firenet import FireNet
 CANDIDATES = ("stage2", "stage3", "s5-00150", "s5-00300", "s6-00200", "s6-00400", "s6-00600", "s7-00100", "s7-00200",
               "s7-00300", "s7-00400", "s7-00500", "s7-00600", "s8-00250", "s8-00500", "s8-00750", "s9-00100",
               "s9-00200", "s9-00300", "s9-00400", "s9-00500", "s9-00600", "s10-00100", "s10-00200", "s10-00300",
-              "s11-00100", "s11-00200", "s12-00300", "s12-00750", "s12-00900")
+              "s11-00100", "s11-00200", "s12-00300", "s12-00750", "s12-00900",
+              "s13-00300", "s13-00400", "s13-00500")
 #: The firenet-sim candidates scored so far (FIRENET_SIM_CANDIDATES picks among them and others).
 FIRENET_SIM_SCORED = ("fs1-shipped", "fs2-00500", "fs2-00750", "fs2-01000", "fs2-01250", "fs2-01500", "fs2-01750",
                       "fs2-02000", "fs3-00200", "fs3-00400", "fs3-00600")
