@@ -10,7 +10,7 @@ the same sequences for orientation. Stage 3 (from stage 2's best, at step 1,900:
 so its curve is drawn on a second axis with the scores of the published FireNet and ``firenet-sim``
 on those sequences (``validation_view.csv``, ``python reports/e2vid/validation.py --view 400x250``).
 The third panel is the measure weights are chosen by since stage 3: the sweep harness on training
-photographs (``candidates/results.csv``, mean SSIM over its 16 cells) for stage 2's weights and the
+photographs (``candidates/results.csv.gz``, mean SSIM over its 16 cells) for stage 2's weights and the
 snapshots of stages 5 and 6 (both from stage 2's weights), of stage 7 (from stage 6's step 200) and of
 stage 8 (from stage 7's step 300; its steps are larger: batch 8 of 112-pixel crops against 4 of 48) and of
 stage 9 (from stage 8's step 500), of stage 10 (from stage 9's step 400) and of stage 11 (from stage
@@ -68,8 +68,10 @@ if (here / "e2vid_stage3_train_log.csv").is_file():
     ax3.legend(fontsize=8)
 else:
     ax3.set_visible(False)
-harness = pd.read_csv(here / "candidates" / "results.csv")
-harness = harness[(harness.metric == "ssim") & (harness.status == "ok")].groupby("method")["value"].mean()
+harness = pd.read_csv(here / "candidates" / "results.csv.gz")
+# the 16 training-photograph cells every stage was scored on (not stage 13's added dead-leaves cells)
+harness = harness[(harness.metric == "ssim") & (harness.status == "ok")
+                  & ~harness.image.astype(str).str.contains("leaves-")].groupby("method")["value"].mean()
 # each stage's snapshots, drawn from the weights it started from (stage 7 from stage 6's step 200)
 for prefix, start, label, color in (
         ("e2vid-s5-", ("e2vid-stage2", 0), "stage 5 (16-window sequences, dead leaves)", "C3"),

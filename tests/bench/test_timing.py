@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import time
 
 import numpy as np
 import pandas as pd
@@ -277,20 +276,24 @@ def test_flops_are_counted_against_a_closed_form_and_a_network_is_read_against_t
     assert "| firenet-sim | 32x24 |" in tb.timing_markdown(old)
 
 
-def test_the_inputs_time_is_per_step_for_a_recurrent_method():
+def test_the_inputs_time_is_per_step_for_a_recurrent_method(monkeypatch):
     """``encode_ms`` divides a recurrent method's encoding of the whole history by its step count
-    (its time per frame is per step), and leaves a feed-forward method's whole."""
+    (its time per frame is per step), and leaves a feed-forward method's whole. The clock is a fixed
+    8 ms per call, so the result does not depend on the machine's load."""
 
     class Fake:
         def __init__(self, recurrent):
             self.recurrent = recurrent
 
         def encode(self, sample):
-            time.sleep(0.004)
             return [None] * 4
 
+    ticks = iter(range(0, 10**12, 8_000_000))  # each reading 8 ms after the previous: 8 ms per call
+    real = timer.time_callable
+    monkeypatch.setattr(timer, "time_callable", lambda fn, **kw: real(fn, timer=lambda: next(ticks), **kw))
     whole = timer.encode_ms(Fake(False), None, repeats=3, warmup=0)
     per_step = timer.encode_ms(Fake(True), None, repeats=3, warmup=0)
+    assert whole == 8.0 and per_step == 2.0
     assert whole >= 4.0 and per_step >= 1.0 and per_step < whole / 2
 
 

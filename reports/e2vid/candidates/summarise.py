@@ -2,7 +2,7 @@
 
     python reports/e2vid/candidates/summarise.py [RESULTS.csv ...]
 
-Reads the harness results (default: ``results.csv`` beside this file, the candidates' validation
+Reads the harness results (default: ``results.csv.gz`` beside this file, the candidates' validation
 sweeps concatenated) and prints a Markdown table, best mean SSIM last.
 """
 
@@ -39,7 +39,7 @@ def table(frame: pd.DataFrame) -> str:
 
 
 def main(argv: list[str]) -> int:
-    paths = [Path(p) for p in argv] or [Path(__file__).with_name("results.csv")]
+    paths = [Path(p) for p in argv] or [Path(__file__).with_name("results.csv.gz")]
     print(table(pd.concat([pd.read_csv(p) for p in paths], ignore_index=True)))
     return 0
 
