@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--executor", choices=EXECUTORS, default="local", help="local worker processes (default) or Dask")
     r.add_argument("--workers", type=int, default=1, help="worker processes (default: 1 = in this process)")
     r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask)")
-    r.add_argument("--threads", type=int, help="torch threads per worker (default: usable CPUs / workers)")
+    r.add_argument("--threads", type=int, help="torch threads per worker (default: the usable CPUs that other processes leave idle, / workers)")
     r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
     r.add_argument("--allow-failures", action="store_true", help="exit 0 even when methods or recordings failed")
     r.add_argument("--force", action="store_true", help="replace results of a different configuration in --out")

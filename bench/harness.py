@@ -61,7 +61,7 @@ from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.checks import check_positive_int
-from neuspike.utils.resources import usable_cpus
+from neuspike.utils.resources import default_threads, usable_cpus
 from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
@@ -163,7 +163,8 @@ class Execution:
     scheduler : str or None
         Address of an existing Dask scheduler.
     threads : int or None
-        torch threads per worker; ``None``: the usable CPUs divided by the workers (at least 1),
+        torch threads per worker; ``None``: the usable CPUs other processes leave idle, divided by the
+        workers (at least 1),
         or 1 on a remote Dask cluster.
     cache_dir : path or None
         Where simulated recordings are cached; ``None`` means ``<out>/cache``.
@@ -504,7 +505,8 @@ def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]
 def prepare_execution(execution: Execution, weights: str | None) -> tuple[Any, int, bool, WorkerSetup]:
     """The executor, the threads per worker, whether the workers are remote, and the workers' set-up.
 
-    Threads default to the usable CPUs divided by the workers (1 on a remote Dask cluster); local
+    Threads default to the usable CPUs that other processes leave idle, divided by the workers (1 on a
+    remote Dask cluster); local
     workers x threads beyond the usable CPUs are refused (:class:`InputError`).
     """
     executor = execution.executor
@@ -515,7 +517,12 @@ def prepare_execution(execution: Execution, weights: str | None) -> tuple[Any, i
         executor = make_executor(executor, workers=execution.workers, scheduler=execution.scheduler)
     remote = bool(isinstance(executor, DaskExecutor) and executor.scheduler)
     if threads is None:
-        threads = 1 if remote else max(1, usable_cpus() // max(1, executor.workers))
+        if remote:
+            threads = 1
+        else:  # the CPUs other processes leave idle, shared by the workers
+            threads, note = default_threads(executor.workers)
+            if note:
+                print(f"{note} (--threads overrides)", file=sys.stderr)
     if not remote:  # workers on this machine, with the threads given or the default
         _check_oversubscription(executor.workers, threads)
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from neuspike.utils.jsonio import portable_path
-from neuspike.utils.resources import cpu_model, usable_cpus
+from neuspike.utils.resources import cpu_model, others_busy_cpus, usable_cpus
 
 #: Distributions whose versions are recorded (absent ones are recorded as ``None``).
 PACKAGES = (
@@ -133,13 +133,17 @@ class LoadWatch:
     after each finished piece of work, where up to ``own_threads`` of it is this run's own. A run is
     contended when its cells ran side by side (``side_by_side``) or when other jobs' load reached
     :data:`OTHER_LOAD_CONTENDED` at any reading (the average lags by about a minute, so a job that
-    starts late in a short run may be missed; the readings are recorded).
+    starts late in a short run may be missed; the readings are recorded), or when other processes
+    were running at the start (:func:`~neuspike.utils.resources.others_busy_cpus`, which sees a job
+    the average has not caught up with yet).
     """
 
     def __init__(self, own_threads: int, *, side_by_side: bool = False) -> None:
         self.own_threads = int(own_threads)
         self.side_by_side = bool(side_by_side)
         self.before = load_1min()
+        # what runs right now: the load average misses a job that started within the last minute
+        self.busy_before = others_busy_cpus()
         self.readings: list[float] = []
 
     def read(self) -> None:
@@ -162,11 +166,15 @@ class LoadWatch:
         if other is not None and other >= OTHER_LOAD_CONTENDED:
             reasons.append(f"other jobs loaded the machine (load {other:.2f} beyond this run's "
                            f"{self.own_threads} thread(s))")
+        if self.busy_before:
+            reasons.append(f"other processes kept {self.busy_before} CPU(s) busy when it started")
         return {
             "load_1min": {"before": self.before, "max": max(self.readings, default=None),
                           "last": self.readings[-1] if self.readings else None},
             "other_load": other,
-            "timing_contended": bool(reasons) if other is not None or self.side_by_side else None,
+            "others_busy_cpus_before": self.busy_before,
+            "timing_contended": (bool(reasons) if other is not None or self.side_by_side or self.busy_before is not None
+                                 else None),
             "contention": reasons,
         }
 

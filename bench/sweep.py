@@ -89,7 +89,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                    help="worker processes (default: 1 = in this process)")
     r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask); "
                    "without it a local Dask cluster of --workers processes is started")
-    r.add_argument("--threads", type=int, help="torch threads per worker (default: usable CPUs / workers)")
+    r.add_argument("--threads", type=int, help="torch threads per worker (default: the usable CPUs that other processes leave idle, / workers)")
     r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu; e.g. cuda); "
                    "part of the sweep's identity with the precision it resolves to, so a resume must use the same; "
                    "refused when no selected method runs on a torch device")

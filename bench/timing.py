@@ -111,7 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
                       f"calls, at the paper's four resolutions")
     parser.add_argument("--repeats", type=int, help="timed calls per method and size (overrides --quick/--full)")
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
-    parser.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
+    parser.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that "
+                        "other processes leave idle)")
     parser.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
                                           "the suite's own trained weights need no flag")
     parser.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
@@ -152,6 +153,13 @@ def run(args: argparse.Namespace) -> Path:
         raise InputError(f"{origin}: {str(weights)!r} is not a folder")
     if args.threads is not None:
         set_threads(check_count("--threads", args.threads, 1))
+    else:  # the CPUs other processes leave idle: oversubscribed threads wait on each other
+        from neuspike.utils.resources import default_threads
+
+        threads, note = default_threads()
+        set_threads(threads)
+        if note:
+            print(f"{note} (--threads overrides)", file=sys.stderr)
     preset = FULL if args.full else QUICK
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
@@ -194,7 +202,7 @@ def run(args: argparse.Namespace) -> Path:
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
-                     weights_dir=weights, device=args.device, precision=args.precision, threads=args.threads,
+                     weights_dir=weights, device=args.device, precision=args.precision, threads=torch.get_num_threads(),
                      compiled=args.compile,
                      log=lambda s: (watch.read(), print(s, file=sys.stderr, flush=True)))
     write_text(out / "timing.csv", tb.to_csv_text(timing))

@@ -398,7 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--event-history", type=float, default=1.0, help="seconds of event history per frame (default: 1)")
     p.add_argument("--weights", type=Path, help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
     p.add_argument("--cache", type=Path, help="keep the simulated recording here and reuse it")
-    p.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's own choice)")
+    p.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that other "
+                   "processes leave idle)")
     p.add_argument("--device", default="cpu", help="torch device of the learned methods (default: cpu; e.g. cuda); "
                    "refused when this machine lacks it or no requested method runs on a torch device")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
@@ -421,8 +422,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not duration > 0:
             raise InputError(f"--duration must be positive, got {duration}")
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+        threads = args.threads
+        if threads is None:  # the CPUs other processes leave idle
+            from neuspike.utils.resources import default_threads
+
+            threads, note = default_threads()
+            if note:
+                print(f"{note} (--threads overrides)", file=sys.stderr)
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
-                              height=args.size[1], event_history_s=args.event_history, threads=args.threads,
+                              height=args.size[1], event_history_s=args.event_history, threads=threads,
                               device=args.device)
         rows = run(spec, args.out, cache=args.cache, weights_dir=weights_dir_from_env(args.weights),
                    progress=not args.no_progress)

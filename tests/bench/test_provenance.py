@@ -63,6 +63,7 @@ def test_other_jobs_load_marks_timings_as_contended(monkeypatch):
 
     loads = iter([0.1, 1.2, 1.3, 2.9])  # before; then this run's one thread, then another job joins
     monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(loads), 0.0, 0.0))
+    monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 0)  # nothing else running at the start
     watch = provenance.LoadWatch(1)
     for _ in range(3):
         watch.read()
@@ -108,3 +109,50 @@ def test_more_workers_than_cpus_is_refused_with_the_default_threads(tmp_path):
     with pytest.raises(InputError, match=f"--workers {workers} x --threads 1 = {workers} threads exceed"):
         run_sweep(spec, tmp_path / "out", Execution(workers=workers, progress=False, report=False))
     assert not (tmp_path / "out" / "config.json").exists()
+
+
+def test_a_job_running_at_the_start_marks_timings_contended_before_the_load_average_sees_it(monkeypatch):
+    """The load average lags by about a minute: a job started just before the run reads as quiet
+    there, but the runnable tasks counted at the start see it."""
+    from bench import provenance
+
+    monkeypatch.setattr(provenance.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 2)
+    summary = provenance.LoadWatch(1).summary()
+    assert summary["timing_contended"] is True and summary["others_busy_cpus_before"] == 2
+    assert "2 CPU(s) busy" in summary["contention"][0]
+    monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 0)
+    assert provenance.LoadWatch(1).summary()["timing_contended"] is False
+
+
+def test_default_threads_leave_the_cpus_other_processes_keep_busy(monkeypatch):
+    """Threads per worker default to the idle usable CPUs shared by the workers (at least one), with a
+    note naming the busy CPUs; where the system reports nothing, every usable CPU counts."""
+    from neuspike.utils import resources
+
+    monkeypatch.setattr(resources, "usable_cpus", lambda: 8)
+    for busy, workers, expected in ((0, 1, 8), (0, 2, 4), (3, 1, 5), (3, 2, 2), (8, 1, 1), (12, 4, 1), (None, 2, 4)):
+        monkeypatch.setattr(resources, "others_busy_cpus", lambda busy=busy: busy)
+        threads, note = resources.default_threads(workers)
+        assert threads == expected, (busy, workers)
+        assert (note is not None) == bool(busy) and (not busy or f"{busy} of 8 usable CPU(s) busy" in note)
+
+
+def test_others_busy_cpus_reads_the_runnable_tasks_less_the_reader(monkeypatch, tmp_path):
+    """``procs_running`` counts the process reading it: one running task means nothing else runs; the
+    median of the readings ignores a one-off spike."""
+    import builtins
+    import io
+
+    from neuspike.utils import resources
+
+    values = iter([1, 3, 3, 9, 3])
+    real_open = builtins.open
+
+    def fake_open(path, *args, **kwargs):
+        if str(path) == "/proc/stat":
+            return io.StringIO(f"cpu  1 2 3\nprocs_running {next(values)}\nprocs_blocked 0\n")
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    assert resources.others_busy_cpus(readings=5, interval_s=0.0) == 2

@@ -87,6 +87,7 @@ def test_other_jobs_load_marks_the_timings_contended(bench_run, tmp_path, monkey
     argv, _, _ = bench_run
     for load, contended in ((3.0, True), (0.0, False)):
         monkeypatch.setattr(provenance, "load_1min", lambda load=load: load)
+        monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 0)
         out = tmp_path / f"out-{load:g}"
         args = list(argv)
         args[args.index("--methods") + 1] = "tfp"
