@@ -1,5 +1,5 @@
-"""Whether requested work fits this machine: memory, free disk, the file size limit; and what the
-machine is (:func:`cpu_model`).
+"""Whether requested work fits this machine: memory, free disk, the file size limit, the CPUs other
+processes leave idle (:func:`default_threads`); and what the machine is (:func:`cpu_model`).
 
 Commands estimate what a job needs before starting it and refuse, in one line naming the sizes,
 what cannot fit, rather than failing partway (an allocation error after minutes of work, a disk
