@@ -61,7 +61,7 @@ from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.checks import check_positive_int
-from neuspike.utils.resources import default_threads, usable_cpus
+from neuspike.utils.resources import announce_default_threads, usable_cpus
 from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
@@ -520,9 +520,7 @@ def prepare_execution(execution: Execution, weights: str | None) -> tuple[Any, i
         if remote:
             threads = 1
         else:  # the CPUs other processes leave idle, shared by the workers
-            threads, note = default_threads(executor.workers)
-            if note:
-                print(f"{note} (--threads overrides)", file=sys.stderr)
+            threads = announce_default_threads(executor.workers)
     if not remote:  # workers on this machine, with the threads given or the default
         _check_oversubscription(executor.workers, threads)
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))

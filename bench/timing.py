@@ -154,12 +154,9 @@ def run(args: argparse.Namespace) -> Path:
     if args.threads is not None:
         set_threads(check_count("--threads", args.threads, 1))
     else:  # the CPUs other processes leave idle: oversubscribed threads wait on each other
-        from neuspike.utils.resources import default_threads
+        from neuspike.utils.resources import announce_default_threads
 
-        threads, note = default_threads()
-        set_threads(threads)
-        if note:
-            print(f"{note} (--threads overrides)", file=sys.stderr)
+        set_threads(announce_default_threads())
     preset = FULL if args.full else QUICK
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]

@@ -424,11 +424,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         threads = args.threads
         if threads is None:  # the CPUs other processes leave idle
-            from neuspike.utils.resources import default_threads
+            from neuspike.utils.resources import announce_default_threads
 
-            threads, note = default_threads()
-            if note:
-                print(f"{note} (--threads overrides)", file=sys.stderr)
+            threads = announce_default_threads()
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
                               height=args.size[1], event_history_s=args.event_history, threads=threads,
                               device=args.device)

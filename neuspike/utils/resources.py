@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import platform
 import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -77,6 +78,15 @@ def default_threads(workers: int = 1) -> tuple[int, str | None]:
         note = (f"other processes keep {busy} of {usable_cpus()} usable CPU(s) busy: {threads} torch thread(s)"
                 + (" per worker" if workers > 1 else ""))
     return threads, note
+
+
+def announce_default_threads(workers: int = 1) -> int:
+    """:func:`default_threads` for a command whose ``--threads`` was not given: the thread count,
+    with the note (when there is one) printed on stderr, naming ``--threads`` as the override."""
+    threads, note = default_threads(workers)
+    if note:
+        print(f"{note} (--threads overrides)", file=sys.stderr)
+    return threads
 
 
 def cpu_model() -> str | None:

@@ -138,6 +138,21 @@ def test_default_threads_leave_the_cpus_other_processes_keep_busy(monkeypatch):
         assert (note is not None) == bool(busy) and (not busy or f"{busy} of 8 usable CPU(s) busy" in note)
 
 
+def test_commands_announce_a_reduced_thread_default_on_stderr(monkeypatch, capsys):
+    """The commands' shared default: the thread count, and the note with its override only when other
+    processes keep CPUs busy."""
+    from neuspike.utils import resources
+
+    monkeypatch.setattr(resources, "usable_cpus", lambda: 4)
+    monkeypatch.setattr(resources, "others_busy_cpus", lambda: 1)
+    assert resources.announce_default_threads(1) == 3
+    err = capsys.readouterr().err
+    assert "1 of 4 usable CPU(s) busy" in err and "(--threads overrides)" in err
+    monkeypatch.setattr(resources, "others_busy_cpus", lambda: 0)
+    assert resources.announce_default_threads(2) == 2
+    assert capsys.readouterr().err == ""
+
+
 def test_others_busy_cpus_reads_the_runnable_tasks_less_the_reader(monkeypatch, tmp_path):
     """``procs_running`` counts the process reading it: one running task means nothing else runs; the
     median of the readings ignores a one-off spike."""
