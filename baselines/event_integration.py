@@ -62,6 +62,7 @@ __all__ = [
     "event_contributions",
     "integrate_events",
     "highpass_events",
+    "RunningEventSum",
     "log_to_image",
     "resolve_threshold",
     "EventIntegration",
@@ -166,11 +167,82 @@ def highpass_events(
         raise InputError(f"time_s: expected a finite time, got {time_s!r}")
     if len(events) and events.t_s[-1] > time_s:
         raise InputError(f"highpass_events: the last event at {events.t_s[-1]!r} s is after the output time {time_s!r} s")
-    alpha = 2.0 * math.pi * cutoff_hz
-    # exp of a large negative argument underflows quietly to 0: such events have decayed away.
-    weights = event_contributions(events, threshold=threshold) * np.exp(-alpha * (time_s - events.t_s))
+    threshold = check_positive("threshold", threshold)
+    return _weighted_polarity(events, 2.0 * math.pi * cutoff_hz, time_s, height, width) * threshold
+
+
+def _weighted_polarity(events: EventStream, alpha: float, time_s: float, height: int, width: int) -> np.ndarray:
+    """``sum_i p_i * exp(-alpha * (time_s - t_i))`` per pixel, float64 (H, W); ``alpha = 0``: the
+    plain polarity sum, whole numbers (so running sums of it are exact)."""
+    if alpha == 0.0:
+        return _net_polarity(events, height, width)
     pixel = events.y.astype(np.int64) * width + events.x.astype(np.int64)
+    # exp of a large negative argument underflows quietly to 0: such events have decayed away.
+    weights = events.p.astype(np.float64) * np.exp(-alpha * (time_s - events.t_s))
     return np.bincount(pixel, weights=weights, minlength=height * width).reshape(height, width)
+
+
+class RunningEventSum:
+    """The per-pixel sum ``sum_i p_i * exp(-alpha * (t - t_i))`` over the events a sample carries up
+    to its key instant ``t`` (``alpha = 0``: the plain polarity sum), kept up to date along a video.
+
+    Summing a 1 s history afresh at every frame costs the history's events (tens of millions for a
+    busy scene); the sum is linear in the events, so :meth:`at` with the previous frame's instant
+    instead ages the previous sum, adds the events between the two instants and takes away those
+    that left the history: the previous sample's events before the first one the new sample carries
+    (both samples being time slices of one recording, as :func:`neuspike.formats.samples.stream_samples`
+    cuts them). A frame then costs its new events. With ``alpha = 0`` the sums are whole numbers
+    and the update is exact; with ``alpha > 0`` it agrees with a fresh sum to float64 rounding
+    (~1e-12 relative).
+
+    It sums afresh when there is no previous frame at ``previous_s`` of the same size, when time
+    went back, or when ``alpha`` changed by more than rounding.
+    """
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous frame."""
+        self._carried: tuple[float, float, int, int, EventStream, np.ndarray] | None = None
+        #: Whether the last sum was updated from the previous frame's (``False``: summed afresh).
+        self.last_streamed = False
+
+    def at(self, events: EventStream, *, time_s: float, alpha: float, height: int, width: int,
+           previous_s: float | None = None) -> np.ndarray:
+        """The sum at ``time_s`` over ``events`` (all before ``time_s``; the sample's, from its first).
+
+        ``previous_s``: the key instant of the previous frame of the same video, or ``None`` for a
+        frame summed afresh. Returns float64 (H, W); do not modify it (it is carried to the next frame).
+        """
+        _check_events(events, height, width)
+        state = None if previous_s is None else self._update(events, float(time_s), float(alpha), height, width,
+                                                             float(previous_s))
+        self.last_streamed = state is not None
+        if state is None:
+            state = _weighted_polarity(events, alpha, time_s, height, width)
+        self._carried = (float(time_s), float(alpha), height, width, events, state)
+        return state
+
+    def _update(self, events: EventStream, time_s: float, alpha: float, height: int, width: int,
+                previous_s: float) -> np.ndarray | None:
+        if self._carried is None:
+            return None
+        before_s, before_alpha, h, w, before, state = self._carried
+        if (before_s != previous_s or (h, w) != (height, width) or time_s < before_s
+                or not math.isclose(alpha, before_alpha, rel_tol=1e-9, abs_tol=0.0)):
+            return None
+        if alpha:
+            state = state * math.exp(-alpha * (time_s - before_s))
+        # what left the history: the previous events before the first one this sample carries
+        first = events.t_s[0] if len(events) else np.inf
+        if len(before) and before.t_s[0] < first:
+            state = state - _weighted_polarity(before.between(float(before.t_s[0]), float(first)), alpha, time_s,
+                                               height, width)
+        new = events.between(before_s, time_s)
+        if len(new):
+            state = state + _weighted_polarity(new, alpha, time_s, height, width)
+        return state
 
 
 def log_to_image(log_image: np.ndarray) -> tuple[np.ndarray, str]:
@@ -220,16 +292,12 @@ def resolve_threshold(sample: Sample, override: float | None) -> tuple[float, st
 
 
 class _EventFilter(Method):
-    """Shared parts of the two classical event methods, streaming included.
+    """Shared parts of the two classical event methods, video included.
 
-    Both images are linear in the events, so a video (:meth:`reconstruct_next`) updates the previous
-    frame's image instead of summing the whole history again: it adds the events between the two key
-    instants and takes away those that fell out of the history (the previous sample's events before
-    the current sample's first one; both samples are time slices of one recording). A frame then
-    costs its new events, not the history's (a 1 s history of a busy scene holds tens of millions).
-    Direct integration keeps whole-number polarity sums, so the streamed image is bit for bit the
-    single-frame one; the high-pass filter's decayed sums agree to rounding (float64, ~1e-12
-    relative; the float32 image within 1e-6).
+    In a video (:meth:`reconstruct_next`) the image is updated from the previous frame's
+    (:class:`RunningEventSum`) instead of summing the whole history again: direct integration
+    bit for bit as a single-frame call, the high-pass filter to rounding (its float32 image within
+    1e-6).
     """
 
     inputs = frozenset({"events"})
@@ -240,14 +308,17 @@ class _EventFilter(Method):
         super().__init__(name, threshold=threshold, **params)
         self.last_threshold: float | None = None
         self.last_threshold_source: str | None = None
-        self.reset()
+        self._running = RunningEventSum()
+        self._next_from: float | None = None
 
     def reset(self) -> None:
         """Forget the previous frame (the next one is summed afresh)."""
-        self._carried: tuple[float, int, int, EventStream, np.ndarray] | None = None
-        self._next_from: float | None = None
-        #: Whether the last image was updated from the previous frame's (``False``: summed afresh).
-        self.last_streamed = False
+        self._running.reset()
+
+    @property
+    def last_streamed(self) -> bool:
+        """Whether the last image was updated from the previous frame's (``False``: summed afresh)."""
+        return self._running.last_streamed
 
     def _threshold(self, sample: Sample) -> float:
         """The contrast threshold for ``sample``: the method's parameter, the sample's, or the default."""
@@ -262,55 +333,23 @@ class _EventFilter(Method):
         start = min(float(events.t_s[0]), sample.key_time_s) if len(events) else sample.key_time_s
         return events.between(start, sample.key_time_s)
 
-    # -- what each filter defines: a polarity-weighted sum per pixel, and how it ages ------------
-    def _sum(self, events: EventStream, time_s: float, height: int, width: int) -> np.ndarray:
-        """Per-pixel sum over ``events`` of ``p_i`` times the event's weight at ``time_s``, float64."""
-        raise NotImplementedError
+    def _alpha(self) -> float:
+        """The decay rate of an event's weight, 1/s (0: none)."""
+        return 0.0
 
-    def _age(self, state: np.ndarray, seconds: float) -> np.ndarray:
-        """A state read out ``seconds`` later, before any new event."""
-        return state
-
-    # -- streaming -------------------------------------------------------------------------------
     def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
-        """The image at the sample's key instant, updated from the previous frame's at ``previous_s``.
-
-        Summed afresh (as :meth:`reconstruct`) when there is no previous frame at ``previous_s`` of the
-        same sensor, or when time went back.
-        """
+        """The image at the sample's key instant, updated from the previous frame's at ``previous_s``."""
         self._next_from = float(previous_s)
         try:
             return self.reconstruct(sample)
         finally:
             self._next_from = None
 
-    def _continue(self, sample: Sample, events: EventStream) -> np.ndarray | None:
-        carried = self._carried
-        if carried is None or self._next_from is None:
-            return None
-        before_s, height, width, before, state = carried
-        key = sample.key_time_s
-        if before_s != self._next_from or (height, width) != (sample.height, sample.width) or key < before_s:
-            return None
-        # what left the history: the previous events before the first one this sample carries
-        first = events.t_s[0] if len(events) else np.inf
-        state = self._age(state, key - before_s)
-        if len(before) and before.t_s[0] < first:
-            state = state - self._sum(before.between(float(before.t_s[0]), float(first)), key, height, width)
-        new = events.between(before_s, key)
-        if len(new):
-            state = state + self._sum(new, key, height, width)
-        return state
-
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         threshold = self._threshold(sample)
-        events = self._events_until_key(sample)
-        state = self._continue(sample, events)
-        self.last_streamed = state is not None
-        if state is None:
-            state = self._sum(events, sample.key_time_s, sample.height, sample.width)
-        self._carried = (sample.key_time_s, sample.height, sample.width, events, state)
-        return log_to_image(state * threshold)
+        total = self._running.at(self._events_until_key(sample), time_s=sample.key_time_s, alpha=self._alpha(),
+                                 height=sample.height, width=sample.width, previous_s=self._next_from)
+        return log_to_image(total * threshold)
 
 
 class EventIntegration(_EventFilter):
@@ -321,10 +360,6 @@ class EventIntegration(_EventFilter):
     threshold : float or None
         Contrast threshold in log units; ``None`` takes the sample's, else 0.2.
     """
-
-    def _sum(self, events: EventStream, time_s: float, height: int, width: int) -> np.ndarray:
-        _check_events(events, height, width)
-        return _net_polarity(events, height, width)
 
 
 class EventHighPass(_EventFilter):
@@ -342,12 +377,8 @@ class EventHighPass(_EventFilter):
                  threshold: float | None = None) -> None:
         super().__init__(name, threshold=threshold, cutoff_hz=check_positive("cutoff_hz", cutoff_hz))
 
-    def _sum(self, events: EventStream, time_s: float, height: int, width: int) -> np.ndarray:
-        return highpass_events(events, threshold=1.0, cutoff_hz=self.params["cutoff_hz"], time_s=time_s,
-                               height=height, width=width)
-
-    def _age(self, state: np.ndarray, seconds: float) -> np.ndarray:
-        return state * math.exp(-2.0 * math.pi * self.params["cutoff_hz"] * seconds)
+    def _alpha(self) -> float:
+        return 2.0 * math.pi * self.params["cutoff_hz"]
 
 
 def register_methods(register) -> None:

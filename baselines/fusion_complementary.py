@@ -63,7 +63,7 @@ import math
 
 import numpy as np
 
-from baselines.event_integration import highpass_events, log_to_image, resolve_threshold
+from baselines.event_integration import RunningEventSum, highpass_events, log_to_image, resolve_threshold
 from neuspike.methods.normalisation import rate_to_image
 from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
@@ -256,6 +256,27 @@ class ComplementaryFusion(Method):
         self.last_cutoff_hz: float | None = None
         self.last_threshold: float | None = None
         self.last_threshold_source: str | None = None
+        self._running = RunningEventSum()
+        self._next_from: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous frame (the next one sums its events afresh)."""
+        self._running.reset()
+
+    @property
+    def last_streamed(self) -> bool:
+        """Whether the last events' term was updated from the previous frame's (``False``: afresh)."""
+        return self._running.last_streamed
+
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
+        """Video: the events' term updated from the previous frame's at ``previous_s``
+        (:class:`baselines.event_integration.RunningEventSum`; equal to a single-frame call to
+        rounding), the spike frame computed as for one frame."""
+        self._next_from = float(previous_s)
+        try:
+            return self.reconstruct(sample)
+        finally:
+            self._next_from = None
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
@@ -271,8 +292,8 @@ class ComplementaryFusion(Method):
         events = sample.events
         first = min(float(events.t_s[0]), time_s) if len(events) else time_s
         events = events.between(first, time_s)
-        event_log = highpass_events(events, threshold=threshold, cutoff_hz=cutoff_hz, time_s=time_s,
-                                    height=sample.height, width=sample.width)
+        event_log = threshold * self._running.at(events, time_s=time_s, alpha=2.0 * math.pi * cutoff_hz,
+                                                 height=sample.height, width=sample.width, previous_s=self._next_from)
         self.last_planes, self.last_cutoff_hz = (start, stop), cutoff_hz
         self.last_threshold, self.last_threshold_source = threshold, source
         return _rate_image(frame_rate, event_log, stream.gain)
