@@ -377,6 +377,27 @@ def test_a_shard_built_by_several_processes_holds_the_items_of_one(tmp_path):
         dataclasses.replace(data, workers=0)
 
 
+def test_a_stacked_shard_is_memory_mapped_and_equal_to_the_items(tmp_path):
+    """The stacked shard (written once beside the items, then memory-mapped read-only) holds exactly
+    the items' arrays; a second load reopens it without rewriting, and no partial file is left."""
+    from neuspike.train.sequences import build_shard, load_shard
+
+    spec = _tiny_run(1, 1, tmp_path)
+    data = dataclasses.replace(spec.data, train_items=3)
+    paths = build_shard(training_method("firenet-sim"), data, seed=0, split="train", count=3, folder=tmp_path / "s")
+    held = load_shard(paths)
+    mapped = load_shard(paths, stack_dir=tmp_path / "s")
+    for k in held:
+        assert isinstance(mapped[k], np.memmap) and not mapped[k].flags.writeable, k
+        assert mapped[k].shape == held[k].shape and np.array_equal(mapped[k], held[k]), k
+    stacked = sorted((tmp_path / "s").glob("*.npy"))
+    assert [f.name for f in stacked] == ["train-00000-3.flow.npy", "train-00000-3.targets.npy", "train-00000-3.voxels.npy"]
+    stamps = [f.stat().st_mtime_ns for f in stacked]
+    again = load_shard(paths, stack_dir=tmp_path / "s")
+    assert [f.stat().st_mtime_ns for f in stacked] == stamps and np.array_equal(again["flow"], held["flow"])
+    assert not list((tmp_path / "s").glob("*.partial"))
+
+
 def test_view_fraction_cuts_that_share_of_items_from_the_view_and_fits_the_rest():
     """With ``view_fraction`` f, about f of the items are crops of the view and the others are the whole
     photograph fitted to the item; at its default (1) the key and the draws are a view spec's own."""
