@@ -10,7 +10,9 @@ several over one pass. Stateless methods give exactly the images of single-frame
 the same instants (the samples are equal). Recurrent methods are reset once, at the first frame
 (which warms up on the history as a single-frame call does); later frames go through
 :meth:`~neuspike.methods.Method.reconstruct_next` where a method offers it, which continues the
-recurrent state with only the input after the previous frame.
+recurrent state with only the input after the previous frame; the event filters
+(:class:`baselines.event_integration.RunningEventSum`) update their sums over the history the same
+way, giving the single-frame images (integration bit for bit, the decayed sums to rounding).
 """
 
 from __future__ import annotations
