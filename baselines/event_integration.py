@@ -196,7 +196,9 @@ class RunningEventSum:
     (~1e-12 relative).
 
     It sums afresh when there is no previous frame at ``previous_s`` of the same size, when time
-    went back, or when ``alpha`` changed by more than rounding.
+    went back, when the new events reach back before the previous ones (a longer history), or when
+    ``alpha`` changed by more than rounding. The last sample's events stay referenced until
+    :meth:`reset` (the video stream resets its methods when it ends).
     """
 
     def __init__(self) -> None:
@@ -213,14 +215,23 @@ class RunningEventSum:
         """The sum at ``time_s`` over ``events`` (all before ``time_s``; the sample's, from its first).
 
         ``previous_s``: the key instant of the previous frame of the same video, or ``None`` for a
-        frame summed afresh. Returns float64 (H, W); do not modify it (it is carried to the next frame).
+        frame summed afresh. Returns float64 (H, W), read-only (it is carried to the next frame).
+
+        Raises
+        ------
+        InputError
+            On events of another sensor size, or at or after ``time_s``.
         """
         _check_events(events, height, width)
+        if len(events) and not events.t_s[-1] < time_s:
+            raise InputError(f"RunningEventSum: an event at {float(events.t_s[-1])!r} s is not before the "
+                             f"output time {float(time_s)!r} s")
         state = None if previous_s is None else self._update(events, float(time_s), float(alpha), height, width,
                                                              float(previous_s))
         self.last_streamed = state is not None
         if state is None:
             state = _weighted_polarity(events, alpha, time_s, height, width)
+        state.flags.writeable = False
         self._carried = (float(time_s), float(alpha), height, width, events, state)
         return state
 
@@ -232,13 +243,15 @@ class RunningEventSum:
         if (before_s != previous_s or (h, w) != (height, width) or time_s < before_s
                 or not math.isclose(alpha, before_alpha, rel_tol=1e-9, abs_tol=0.0)):
             return None
+        first = events.t_s[0] if len(events) else np.inf
+        if len(before) and first < before.t_s[0]:
+            return None  # this sample reaches further back (a longer history): not a slice after the last
         if alpha:
             state = state * math.exp(-alpha * (time_s - before_s))
         # what left the history: the previous events before the first one this sample carries
-        first = events.t_s[0] if len(events) else np.inf
         if len(before) and before.t_s[0] < first:
-            state = state - _weighted_polarity(before.between(float(before.t_s[0]), float(first)), alpha, time_s,
-                                               height, width)
+            gone = before if not len(events) else before.between(float(before.t_s[0]), float(first))
+            state = state - _weighted_polarity(gone, alpha, time_s, height, width)
         new = events.between(before_s, time_s)
         if len(new):
             state = state + _weighted_polarity(new, alpha, time_s, height, width)

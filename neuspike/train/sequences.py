@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -249,13 +250,26 @@ def build_shard(method: Any, data: SequenceData, *, seed: int, split: str, count
     return paths
 
 
+def _stack_manifest(paths: Sequence[Path]) -> list[list[Any]]:
+    """What a stack was built from: each item's name, size and modification time."""
+    out = []
+    for p in paths:
+        st = Path(p).stat()
+        out.append([Path(p).name, st.st_size, st.st_mtime_ns])
+    return out
+
+
 def load_shard(paths: Sequence[Path], *, stack_dir: Path | None = None) -> dict[str, np.ndarray]:
     """Stack items: ``voxels`` (N, K, 5, H, W), ``targets`` (N, K, 1, H, W), ``flow`` (N, K, 2, H, W), float16.
 
-    With ``stack_dir`` the stacks are written there once (``<first item>-<N>.<array>.npy``, each
-    complete or absent: written under a temporary name and renamed) and returned memory-mapped, read
-    only: a shard larger than the memory the training's activations leave (600 items of 240 pixels
-    are 8.8 GB) is then paged from disk instead of held whole, and later runs open it at once.
+    With ``stack_dir`` the stacks are written there once (``<first item>-<N>.<array>.npy``) and
+    returned memory-mapped, read only: a shard larger than the memory the training's activations leave
+    (600 items of 240 pixels are 8.8 GB) is then paged from disk instead of held whole, and later runs
+    open it at once. Each array is written under a temporary name of this process's own (cleaned up
+    with the shard's other temporaries) and renamed, then ``<first item>-<N>.items.json`` records the
+    items it was built from (name, size, modification time): a stack without it, or whose items
+    changed since, is built again. Two runs building at once each write their own copy; the last
+    rename wins, with the same content.
     """
     if stack_dir is None or not paths:
         parts: dict[str, list[np.ndarray]] = {"voxels": [], "targets": [], "flow": []}
@@ -265,30 +279,49 @@ def load_shard(paths: Sequence[Path], *, stack_dir: Path | None = None) -> dict[
                 parts["targets"].append(z["targets"][:, None])
                 parts["flow"].append(z["flow"])
         return {k: np.stack(v) for k, v in parts.items()}
+    import tempfile
+
     stack_dir = Path(stack_dir)
     stem = f"{Path(paths[0]).stem}-{len(paths)}"
     files = {k: stack_dir / f"{stem}.{k}.npy" for k in ("voxels", "targets", "flow")}
-    if not all(f.is_file() for f in files.values()):
+    manifest_path = stack_dir / f"{stem}.items.json"
+    manifest = _stack_manifest(paths)
+    try:
+        current = json.loads(manifest_path.read_text()) == manifest and all(f.is_file() for f in files.values())
+    except (OSError, ValueError):
+        current = False
+    if not current:
+        manifest_path.unlink(missing_ok=True)
         with np.load(paths[0]) as z:
             first = {"voxels": z["voxels"], "targets": z["targets"][:, None], "flow": z["flow"]}
-        temps = {k: f.with_name(f.name + ".partial") for k, f in files.items()}
-        outs = {k: np.lib.format.open_memmap(temps[k], mode="w+", dtype=a.dtype, shape=(len(paths), *a.shape))
-                for k, a in first.items()}
-        for i, p in enumerate(paths):
-            with np.load(p) as z:
-                outs["voxels"][i] = z["voxels"]
-                outs["targets"][i] = z["targets"][:, None]
-                outs["flow"][i] = z["flow"]
-        for k, out in outs.items():
-            out.flush()
-            del out
-            temps[k].replace(files[k])
-        outs.clear()
+        temps, outs = {}, {}
+        try:
+            for k, a in first.items():
+                fd, name = tempfile.mkstemp(dir=stack_dir, prefix=f".{files[k].name}.", suffix=".tmp")
+                os.close(fd)
+                temps[k] = Path(name)
+                outs[k] = np.lib.format.open_memmap(temps[k], mode="w+", dtype=a.dtype, shape=(len(paths), *a.shape))
+            for i, p in enumerate(paths):
+                with np.load(p) as z:
+                    outs["voxels"][i] = z["voxels"]
+                    outs["targets"][i] = z["targets"][:, None]
+                    outs["flow"][i] = z["flow"]
+            for out in outs.values():
+                out.flush()
+            outs.clear()  # unmapped before the rename
+            for k, tmp in temps.items():
+                tmp.replace(files[k])
+            temps.clear()
+        finally:
+            outs.clear()
+            for tmp in temps.values():
+                tmp.unlink(missing_ok=True)
+        atomic.write_text(manifest_path, json.dumps(manifest) + "\n")
     shard = {k: np.load(f, mmap_mode="r") for k, f in files.items()}
     n = {a.shape[0] for a in shard.values()}
     if n != {len(paths)}:
         raise InputError(f"the stacked shard in {stack_dir} holds {sorted(n)} items, expected {len(paths)}; "
-                         f"delete {stem}.*.npy there to rebuild it")
+                         f"delete {stem}.* there to rebuild it")
     return shard
 
 

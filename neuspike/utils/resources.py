@@ -17,7 +17,7 @@ from pathlib import Path
 
 from neuspike.errors import InputError
 
-__all__ = ["available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "cpu_model",
+__all__ = ["announce_default_threads", "available_memory_bytes", "check_disk", "check_file_size_limit", "check_memory", "cpu_model",
            "default_threads", "format_bytes", "free_cpus", "others_busy_cpus", "usable_cpus"]
 
 

@@ -157,15 +157,19 @@ def stream_methods(
     for m in methods:
         m.reset()
     previous: float | None = None
-    for sample in stream_samples(recording, times_s, inputs=inputs, window_planes=window_planes,
-                                 event_history_s=event_history_s):
-        images, seconds = {}, {}
+    try:
+        for sample in stream_samples(recording, times_s, inputs=inputs, window_planes=window_planes,
+                                     event_history_s=event_history_s):
+            images, seconds = {}, {}
+            for m in methods:
+                t0 = time.perf_counter()
+                images[m.name] = _next_image(m, sample, previous)
+                seconds[m.name] = time.perf_counter() - t0
+            previous = sample.key_time_s
+            yield sample, images, seconds
+    finally:  # the carried state (a recurrent state, the last sample's events) is not kept past the video
         for m in methods:
-            t0 = time.perf_counter()
-            images[m.name] = _next_image(m, sample, previous)
-            seconds[m.name] = time.perf_counter() - t0
-        previous = sample.key_time_s
-        yield sample, images, seconds
+            m.reset()
 
 
 def reconstruct_video(

@@ -22,6 +22,7 @@ import baselines.event_integration as event_module
 import baselines.firenet as firenet_module
 import baselines.fusion_complementary as fusion_module
 from baselines.event_integration import (
+    RunningEventSum,
     DEFAULT_THRESHOLD,
     EventHighPass,
     EventIntegration,
@@ -189,6 +190,44 @@ def test_highpass_closed_form_equals_the_recursion(seed):
     expected = highpass_by_recursion(events, threshold, 2 * math.pi * cutoff_hz, 0.001)
     got = highpass_events(events, threshold=threshold, cutoff_hz=cutoff_hz, time_s=0.001, height=3, width=4)
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0.0, 31.4])
+def test_running_event_sum_equals_a_fresh_sum_along_a_stream(alpha):
+    """Slices of one stream with timestamps on a coarse grid (many events share a time; instants and
+    slice starts fall on events), empty slices, a gap longer than the history and a history that
+    grows then shrinks: every update equals a fresh sum (exactly for alpha = 0), and the update is
+    refused (a fresh sum) where the new slice reaches back before the previous one or time goes back."""
+    rng = np.random.default_rng(7)
+    h, w, n = 6, 5, 4000
+    t = np.sort(rng.integers(0, 400, n)) * 1e-3  # 400 distinct times, ~10 events each
+    t[(t > 0.15) & (t < 0.25)] = 0.3  # a quiet stretch, then a pile-up at one instant
+    t = np.sort(t)
+    stream = EventStream(t, rng.integers(0, w, n), rng.integers(0, h, n), rng.choice(np.array([-1, 1]), n), w, h)
+    running = RunningEventSum()
+    previous, refused = None, 0
+    #        (instant, history): instants on the grid; 0.2-0.26 sit in the quiet stretch (empty slices)
+    plan = [(0.05, 0.02), (0.051, 0.02), (0.051, 0.02), (0.09, 0.02), (0.12, 0.06), (0.2, 0.02), (0.26, 0.02),
+            (0.3, 0.02), (0.301, 0.02), (0.35, 0.06), (0.36, 0.01), (0.33, 0.01), (0.39, 0.01)]
+    for key, history in plan:
+        events = stream.between(key - history, key)
+        got = running.at(events, time_s=key, alpha=alpha, height=h, width=w, previous_s=previous).copy()
+        fresh = RunningEventSum().at(events, time_s=key, alpha=alpha, height=h, width=w)
+        reaches_back = previous is not None and key >= previous and prev_first is not None and len(events) \
+            and events.t_s[0] < prev_first
+        expected_stream = previous is not None and key >= previous and not reaches_back
+        assert running.last_streamed == expected_stream, (key, history)
+        refused += bool(reaches_back)
+        if alpha == 0.0:
+            assert np.array_equal(got, fresh), key
+        else:
+            np.testing.assert_allclose(got, fresh, rtol=0, atol=1e-12, err_msg=str(key))
+        previous, prev_first = key, (events.t_s[0] if len(events) else None)
+    assert refused == 1
+    assert not running.at(events, time_s=0.39, alpha=alpha, height=h, width=w).flags.writeable
+    with pytest.raises(InputError, match="not before the output time"):
+        running.at(stream.between(0.1, 0.2), time_s=float(stream.between(0.1, 0.2).t_s[-1]), alpha=alpha,
+                   height=h, width=w)
 
 
 def test_an_old_event_decays_exponentially():

@@ -379,7 +379,8 @@ def test_a_shard_built_by_several_processes_holds_the_items_of_one(tmp_path):
 
 def test_a_stacked_shard_is_memory_mapped_and_equal_to_the_items(tmp_path):
     """The stacked shard (written once beside the items, then memory-mapped read-only) holds exactly
-    the items' arrays; a second load reopens it without rewriting, and no partial file is left."""
+    the items' arrays; a second load reopens it without rewriting, no temporary is left, and a stack
+    whose items changed, or without its record of them, is built again."""
     from neuspike.train.sequences import build_shard, load_shard
 
     spec = _tiny_run(1, 1, tmp_path)
@@ -392,10 +393,21 @@ def test_a_stacked_shard_is_memory_mapped_and_equal_to_the_items(tmp_path):
         assert mapped[k].shape == held[k].shape and np.array_equal(mapped[k], held[k]), k
     stacked = sorted((tmp_path / "s").glob("*.npy"))
     assert [f.name for f in stacked] == ["train-00000-3.flow.npy", "train-00000-3.targets.npy", "train-00000-3.voxels.npy"]
+    assert (tmp_path / "s" / "train-00000-3.items.json").is_file()
     stamps = [f.stat().st_mtime_ns for f in stacked]
     again = load_shard(paths, stack_dir=tmp_path / "s")
     assert [f.stat().st_mtime_ns for f in stacked] == stamps and np.array_equal(again["flow"], held["flow"])
-    assert not list((tmp_path / "s").glob("*.partial"))
+    assert not list((tmp_path / "s").glob(".*.tmp"))
+    # an item built again (here: rewritten with other bytes) makes the stack stale: it is rebuilt
+    with np.load(paths[1]) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["flow"] = arrays["flow"] + np.float16(1)
+    np.savez(paths[1], **arrays)
+    rebuilt = load_shard(paths, stack_dir=tmp_path / "s")
+    assert np.array_equal(rebuilt["flow"][1], arrays["flow"]) and np.array_equal(rebuilt["flow"][0], held["flow"][0])
+    # a stack without its record of items (an interrupted build) is rebuilt too
+    (tmp_path / "s" / "train-00000-3.items.json").unlink()
+    assert np.array_equal(load_shard(paths, stack_dir=tmp_path / "s")["flow"], rebuilt["flow"])
 
 
 def test_view_fraction_cuts_that_share_of_items_from_the_view_and_fits_the_rest():
