@@ -63,6 +63,7 @@ __all__ = [
     "integrate_events",
     "highpass_events",
     "RunningEventSum",
+    "StreamsEventSum",
     "log_to_image",
     "resolve_threshold",
     "EventIntegration",
@@ -304,7 +305,34 @@ def resolve_threshold(sample: Sample, override: float | None) -> tuple[float, st
     return DEFAULT_THRESHOLD, "default"
 
 
-class _EventFilter(Method):
+class StreamsEventSum:
+    """Video support for a method whose events' term is a :class:`RunningEventSum` (``self._running``):
+    :meth:`reset` forgets the previous frame, :meth:`reconstruct_next` passes the previous frame's
+    instant on to the sum (as ``self._next_from``, read by the method's ``_reconstruct``)."""
+
+    _running: RunningEventSum
+    _next_from: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous frame (the next one sums its events afresh)."""
+        self._running.reset()
+
+    @property
+    def last_streamed(self) -> bool:
+        """Whether the last events' sum was updated from the previous frame's (``False``: summed afresh)."""
+        return self._running.last_streamed
+
+    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
+        """The image at the sample's key instant, its events' sum updated from the previous frame's at
+        ``previous_s`` (equal to a single-frame call, to rounding for decayed sums)."""
+        self._next_from = float(previous_s)
+        try:
+            return self.reconstruct(sample)
+        finally:
+            self._next_from = None
+
+
+class _EventFilter(StreamsEventSum, Method):
     """Shared parts of the two classical event methods, video included.
 
     In a video (:meth:`reconstruct_next`) the image is updated from the previous frame's
@@ -322,16 +350,6 @@ class _EventFilter(Method):
         self.last_threshold: float | None = None
         self.last_threshold_source: str | None = None
         self._running = RunningEventSum()
-        self._next_from: float | None = None
-
-    def reset(self) -> None:
-        """Forget the previous frame (the next one is summed afresh)."""
-        self._running.reset()
-
-    @property
-    def last_streamed(self) -> bool:
-        """Whether the last image was updated from the previous frame's (``False``: summed afresh)."""
-        return self._running.last_streamed
 
     def _threshold(self, sample: Sample) -> float:
         """The contrast threshold for ``sample``: the method's parameter, the sample's, or the default."""
@@ -349,14 +367,6 @@ class _EventFilter(Method):
     def _alpha(self) -> float:
         """The decay rate of an event's weight, 1/s (0: none)."""
         return 0.0
-
-    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
-        """The image at the sample's key instant, updated from the previous frame's at ``previous_s``."""
-        self._next_from = float(previous_s)
-        try:
-            return self.reconstruct(sample)
-        finally:
-            self._next_from = None
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         threshold = self._threshold(sample)

@@ -63,7 +63,7 @@ import math
 
 import numpy as np
 
-from baselines.event_integration import RunningEventSum, highpass_events, log_to_image, resolve_threshold
+from baselines.event_integration import RunningEventSum, StreamsEventSum, highpass_events, log_to_image, resolve_threshold
 from neuspike.methods.normalisation import rate_to_image
 from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
@@ -217,7 +217,7 @@ def _rate_image(frame_rate: np.ndarray, event_log: np.ndarray, gain: float | Non
     return rate_to_image(frame_rate * np.exp(np.minimum(event_log, cap)), gain)
 
 
-class ComplementaryFusion(Method):
+class ComplementaryFusion(StreamsEventSum, Method):
     """``fusion-complementary``: complementary filter of events around a causal spike rate.
 
     Parameters
@@ -257,26 +257,6 @@ class ComplementaryFusion(Method):
         self.last_threshold: float | None = None
         self.last_threshold_source: str | None = None
         self._running = RunningEventSum()
-        self._next_from: float | None = None
-
-    def reset(self) -> None:
-        """Forget the previous frame (the next one sums its events afresh)."""
-        self._running.reset()
-
-    @property
-    def last_streamed(self) -> bool:
-        """Whether the last events' term was updated from the previous frame's (``False``: afresh)."""
-        return self._running.last_streamed
-
-    def reconstruct_next(self, sample: Sample, *, previous_s: float) -> np.ndarray:
-        """Video: the events' term updated from the previous frame's at ``previous_s``
-        (:class:`baselines.event_integration.RunningEventSum`; equal to a single-frame call to
-        rounding), the spike frame computed as for one frame."""
-        self._next_from = float(previous_s)
-        try:
-            return self.reconstruct(sample)
-        finally:
-            self._next_from = None
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
