@@ -3,10 +3,11 @@ large flat regions, which the training photographs' 16 harness cells lack.
 
     python reports/e2vid/candidates/leaves.py OUT_DIR
 
-Writes ``leaves-1.png`` and ``leaves-2.png`` (8-bit luma, 600x375, so a 400x250 view has room to
+Writes ``leaves-1.png`` ... ``leaves-4.png`` (8-bit luma, 600x375, so a 400x250 view has room to
 pan): the first frame of a dead-leaves scene (:mod:`neuspike.scenes.dead_leaves`) at seeds 900001
-and 900002. Training items draw their dead-leaves seeds from the whole 31-bit range, so these two
-pictures are, to a chance of about 1e-6, never trained on. Their sweep cells are
+to 900004 (the first two since stage 13, the other two since stage 17). Training items draw their
+dead-leaves seeds from the whole 31-bit range, so these pictures are, to a chance of about 2e-6,
+never trained on. Their sweep cells are
 ``KIND:OUT_DIR/leaves-N.png``.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from neuspike.scenes import SceneSpec, make_scene
 
-SEEDS = (900001, 900002)
+SEEDS = (900001, 900002, 900003, 900004)
 SIZE = (600, 375)
 
 
