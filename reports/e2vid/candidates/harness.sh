@@ -8,7 +8,8 @@
 #   noisy     36 cells: the noise test's three levels (L = 1/4, S = 128) on the 8 training-photograph
 #             scenes and 4 dead-leaves scenes
 # all (the default) runs the three. HARNESS_EXTRA (comma-separated registry names, e.g. firenet, whose
-# weights must then be in runs/e2vid-candidates too) adds reference methods. Every cell is 400x250, seed 0, float32, so that scores from
+# weights must then be in runs/e2vid-candidates too) adds reference methods; HARNESS_WORKERS (default 2)
+# sets the worker processes (1 thread each). Every cell is 400x250, seed 0, float32, so that scores from
 # different machines compare. Results go to runs/harness-PART-NAMES; score them with
 # `python reports/e2vid/candidates/score.py`.
 set -e
@@ -20,7 +21,7 @@ python $HERE/leaves.py $LEAVES > /dev/null
 METHODS=$(echo "$NAMES" | sed 's/\([^,]*\)/e2vid-\1/g')${HARNESS_EXTRA:+,$HARNESS_EXTRA}
 PHOTOS=pan:astronaut,zoom:brick,fan:cat,still:coffee,pan:rocket,zoom:grass,fan:page,still:cell
 COMMON="--size 400x250 --seeds 0 --methods $METHODS --plugin $HERE/variants.py --weights runs/e2vid-candidates
-        --cache runs/e2vid-cand-cache --workers 2 --threads 1 --no-progress --no-report"
+        --cache runs/e2vid-cand-cache --workers ${HARNESS_WORKERS:-2} --threads 1 --no-progress --no-report"
 export E2VID_CANDIDATES=$NAMES E2VID_PRECISION=float32
 TAG=$(echo "$NAMES" | tr ',' '+')
 if [ "$PART" = clean ] || [ "$PART" = all ]; then
