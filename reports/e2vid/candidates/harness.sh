@@ -1,7 +1,8 @@
 # The selection harness for e2vid candidates (from stage 17): 84 cells, none on a test photograph.
 #     bash reports/e2vid/candidates/harness.sh NAME[,NAME...] [clean|noisy|leaves34|all]
-# NAME is a candidate whose weights are runs/e2vid-candidates/e2vid-NAME.safetensors (see README.md
-# beside this file); the methods are registered by variants.py. Parts:
+# NAME is a candidate whose weights are runs/e2vid-candidates/e2vid-NAME.safetensors, or, written
+# firenet-sim-NAME, one whose weights are runs/e2vid-candidates/firenet-sim-NAME.safetensors (see
+# README.md beside this file); the methods are registered by variants.py. Parts:
 #   clean     the 32 cells used since stage 13: 8 scenes on training photographs and 8 on the held-out
 #             dead-leaves pictures 1-2, at L = 1/16 and 1/4 (S = 128, no sensor noise)
 #   leaves34  16 more clean cells: the four scene kinds on held-out dead-leaves pictures 3 and 4
@@ -18,11 +19,15 @@ PART=${2:-all}
 HERE=reports/e2vid/candidates
 LEAVES=runs/harness-leaves
 python $HERE/leaves.py $LEAVES > /dev/null
-METHODS=$(echo "$NAMES" | sed 's/\([^,]*\)/e2vid-\1/g')${HARNESS_EXTRA:+,$HARNESS_EXTRA}
+E2VID=$(echo "$NAMES" | tr ',' '\n' | grep -v '^firenet-sim-' | paste -sd, || true)
+FIRENET_SIM=$(echo "$NAMES" | tr ',' '\n' | grep '^firenet-sim-' | sed 's/^firenet-sim-//' | paste -sd, || true)
+METHODS=$(echo "$E2VID" | sed 's/\([^,][^,]*\)/e2vid-\1/g')
+METHODS=$(echo "$METHODS${FIRENET_SIM:+,}$(echo "$FIRENET_SIM" | sed 's/\([^,][^,]*\)/firenet-sim-\1/g')" | sed 's/^,//')
+METHODS=$METHODS${HARNESS_EXTRA:+,$HARNESS_EXTRA}
 PHOTOS=pan:astronaut,zoom:brick,fan:cat,still:coffee,pan:rocket,zoom:grass,fan:page,still:cell
 COMMON="--size 400x250 --seeds 0 --methods $METHODS --plugin $HERE/variants.py --weights runs/e2vid-candidates
         --cache runs/e2vid-cand-cache --workers ${HARNESS_WORKERS:-2} --threads 1 --no-progress --no-report"
-export E2VID_CANDIDATES=$NAMES E2VID_PRECISION=float32
+export E2VID_CANDIDATES=${E2VID:-none} FIRENET_SIM_CANDIDATES=${FIRENET_SIM:-none} E2VID_PRECISION=float32
 TAG=$(echo "$NAMES" | tr ',' '+')
 if [ "$PART" = clean ] || [ "$PART" = all ]; then
   python -m bench.sweep --axis light --lights 1/16,1/4 $COMMON --out runs/harness-clean-$TAG \

@@ -4,7 +4,7 @@ and from stage 13 two held-out dead-leaves pictures made by ``leaves.py``; never
 Registers ``e2vid-<name>`` for every candidate name: the ``e2vid`` network with the weights file
 ``e2vid-<name>.safetensors``, looked up in the sweep's ``--weights`` folder (the candidates are not
 shipped; see README.md beside this file). The names are ``E2VID_CANDIDATES`` (comma-separated) when
-that variable is set, otherwise the stages compared so far. ``E2VID_PRECISION`` (float32 or bfloat16),
+that variable is set (``none``: no e2vid candidate), otherwise the stages compared so far. ``E2VID_PRECISION`` (float32 or bfloat16),
 when set, fixes the candidates' precision (otherwise the ``auto`` choice of the machine).
 
 ``FIRENET_SIM_CANDIDATES`` (comma-separated; otherwise the ones scored so far) registers ``firenet-sim-<name>`` the
@@ -29,10 +29,11 @@ FIRENET_SIM_SCORED = ("fs1-shipped", "fs2-00500", "fs2-00750", "fs2-01000", "fs2
 
 def register_methods(register):
     names = [n.strip() for n in os.environ.get("E2VID_CANDIDATES", "").split(",") if n.strip()] or CANDIDATES
+    names = [n for n in names if n != "none"]
     precision = os.environ.get("E2VID_PRECISION")
     params = {"normalize": True, **({"precision": precision} if precision else {})}
     for name in names:
         register(f"e2vid-{name}", E2VID, params=params, weights=f"e2vid-{name}.safetensors")
     firenet = [n.strip() for n in os.environ.get("FIRENET_SIM_CANDIDATES", "").split(",") if n.strip()]
-    for name in firenet or FIRENET_SIM_SCORED:
+    for name in [n for n in firenet or FIRENET_SIM_SCORED if n != "none"]:
         register(f"firenet-sim-{name}", FireNet, params=params, weights=f"firenet-sim-{name}.safetensors")
