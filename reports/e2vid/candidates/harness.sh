@@ -19,11 +19,9 @@ PART=${2:-all}
 HERE=reports/e2vid/candidates
 LEAVES=runs/harness-leaves
 python $HERE/leaves.py $LEAVES > /dev/null
+METHODS=$(echo "$NAMES" | tr ',' '\n' | sed '/^firenet-sim-/!s/^/e2vid-/' | paste -sd,)${HARNESS_EXTRA:+,$HARNESS_EXTRA}
 E2VID=$(echo "$NAMES" | tr ',' '\n' | grep -v '^firenet-sim-' | paste -sd, || true)
 FIRENET_SIM=$(echo "$NAMES" | tr ',' '\n' | grep '^firenet-sim-' | sed 's/^firenet-sim-//' | paste -sd, || true)
-METHODS=$(echo "$E2VID" | sed 's/\([^,][^,]*\)/e2vid-\1/g')
-METHODS=$(echo "$METHODS${FIRENET_SIM:+,}$(echo "$FIRENET_SIM" | sed 's/\([^,][^,]*\)/firenet-sim-\1/g')" | sed 's/^,//')
-METHODS=$METHODS${HARNESS_EXTRA:+,$HARNESS_EXTRA}
 PHOTOS=pan:astronaut,zoom:brick,fan:cat,still:coffee,pan:rocket,zoom:grass,fan:page,still:cell
 COMMON="--size 400x250 --seeds 0 --methods $METHODS --plugin $HERE/variants.py --weights runs/e2vid-candidates
         --cache runs/e2vid-cand-cache --workers ${HARNESS_WORKERS:-2} --threads 1 --no-progress --no-report"

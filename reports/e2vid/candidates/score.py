@@ -23,6 +23,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.results import read_csv
+
 EXPECTED = {"photos": 16, "leaves": 32, "noisy": 36}
 
 
@@ -31,7 +33,7 @@ def load(paths: list[str]) -> pd.DataFrame:
     for p in map(Path, paths):
         if p.is_dir():
             p = p / "results.csv"
-        frames.append(pd.read_csv(p))
+        frames.append(read_csv(p))
     d = pd.concat(frames, ignore_index=True)
     d = d[(d.metric == "ssim") & (d.status == "ok")]
     # a cell's id also hashes where and how it ran, so the same condition is matched on what it is
