@@ -43,8 +43,12 @@ the torch device of a learned method's row, empty for the others), ``metadata.js
 device, commit, versions, machine, threads), ``README.md`` (the table) and
 ``accuracy_vs_speed.png`` (from ``results.csv`` alone; ``--plot-only`` redraws it).
 
+``--compile`` runs the learned methods' networks through ``torch.compile``: each method first streams
+two frames untimed (a cold start and a continued step build every graph the stream uses; their time
+is the row's ``compile_s``), then the timed stream starts afresh. ``--precision`` overrides ``auto``.
+
     python -m bench.video [--full | --duration S] [--fps F] [--methods a,b] [--weights DIR]
-                          [--device D] [--cache DIR] [--out DIR] [--threads N]
+                          [--device D] [--precision P] [--compile] [--cache DIR] [--out DIR] [--threads N]
 """
 
 from __future__ import annotations
@@ -62,11 +66,12 @@ from typing import Any, Sequence
 import numpy as np
 
 from neuspike.errors import InputError, NeuSpikeError, one_line
+from neuspike.methods.precision import PRECISIONS
 from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
            "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "device",
-           "error")
+           "compile_s", "error")
 READ_ONLY = "read-only"
 SINGLE_FRAME = "tfp (single-frame calls)"
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "reports" / "video" / "bench"
@@ -91,6 +96,11 @@ class VideoBenchSpec:
     threads: int | None = None
     #: torch device of the learned methods (the others run on the CPU whatever it is)
     device: str = "cpu"
+    #: run the learned methods' networks through ``torch.compile`` (compiled at the first frame, whose
+    #: time then includes the compiling; see :class:`~neuspike.methods.learned.LearnedMethod`)
+    compiled: bool = False
+    #: precision of the learned methods (``None``: each method's own, ``auto`` for those shipped)
+    precision: str | None = None
 
 
 def simulate_standard(spec: VideoBenchSpec, folder: Path) -> dict[str, Any]:
@@ -142,8 +152,16 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
         e = entry(name)
         inputs = "+".join(sorted(e.inputs))
         device = spec.device if uses_device(e) else None  # a classical method alone would refuse a GPU device
-        method = create_many([name], weights_dir=weights_dir, device=device or "cpu",
-                             skip_unavailable=False)[name].method
+        method = create_many([name], weights_dir=weights_dir, device=device or "cpu", compiled=spec.compiled,
+                             precision=spec.precision, skip_unavailable=False)[name].method
+        compile_s = None
+        if method.params.get("compiled", False):
+            # compile untimed first: the first two frames build every graph the stream uses (a cold
+            # start and a continued step); the timed stream below starts afresh (stream_methods resets)
+            t0 = time.perf_counter()
+            for _ in stream_methods([method], rec, times[:2], event_history_s=spec.event_history_s):
+                pass
+            compile_s = time.perf_counter() - t0
         busy, psnrs, ssims, flicks, steps = 0.0, [], [], [], []
         meter = FlickerMeter()
         for sample, images, seconds in stream_methods([method], rec, times, event_history_s=spec.event_history_s):
@@ -165,7 +183,7 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
                     mean_flicker_rmse=float(np.mean(flicks)) if flicks else None,
                     normalisation=method.last_normalisation,
                     steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), device=device,
-                    error="")
+                    compile_s=compile_s, error="")
     except Exception as exc:  # a failing method is a row with its error, not a crash of the benchmark
         return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps, device=device,
                     error=one_line(exc))
@@ -331,7 +349,8 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
         "divided by the output rate. Scores against the exact ground truth, data_range 1; flicker = RMS error of "
         "consecutive differences. Regenerate: `python -m bench.video"
         + (" --full" if spec.duration_s >= 1.0 else "") + (f" --device {spec.device}" if spec.device != "cpu" else "")
-        + "`." + _contention_sentence(run_meta),
+        + (f" --precision {spec.precision}" if spec.precision else "")
+        + (" --compile" if spec.compiled else "") + "`." + _contention_sentence(run_meta),
         "",
         "| method | inputs | frames/s | real-time factor | PSNR (dB) | SSIM | flicker | steps/frame | threads | note |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -341,9 +360,19 @@ def markdown(frame: Any, spec: VideoBenchSpec, run_meta: dict[str, Any]) -> str:
             f"| {r['method']} | {r['inputs'] or ''} | {_fmt(r['frames_per_s'], '.1f')} | {_fmt(r['real_time_factor'], '.3g')} "
             f"| {_fmt(r['mean_psnr_db'], '.2f')} | {_fmt(r['mean_ssim'], '.3f')} | {_fmt(r['mean_flicker_rmse'], '.4f')} "
             f"| {_fmt(r['steps_per_frame'], '.1f')} | {_fmt(r['threads'], '.0f')} "
-            f"| {r['error'] if isinstance(r['error'], str) else ''} |"
+            f"| {_note(r)} |"
         )
     return "\n".join(lines) + "\n"
+
+
+def _note(r: dict[str, Any]) -> str:
+    """A row's note: its error, or that its network was compiled (untimed, before its frames)."""
+    if isinstance(r.get("error"), str) and r["error"]:
+        return r["error"]
+    compile_s = r.get("compile_s")
+    if compile_s is not None and not (isinstance(compile_s, float) and math.isnan(compile_s)):
+        return f"compiled (torch.compile; {compile_s:.1f} s for two untimed frames first)"
+    return ""
 
 
 def plot(csv_path: Path, png_path: Path) -> Path:
@@ -402,6 +431,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "processes leave idle)")
     p.add_argument("--device", default="cpu", help="torch device of the learned methods (default: cpu; e.g. cuda); "
                    "refused when this machine lacks it or no requested method runs on a torch device")
+    p.add_argument("--precision", choices=PRECISIONS,
+                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
+                   "faster than float32 on this device)")
+    p.add_argument("--compile", action="store_true",
+                   help="run the learned methods' networks through torch.compile (weights frozen; needs a C++ "
+                   "compiler); each is compiled on its first frames, whose time is counted (a long video repays it)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -429,7 +464,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             threads = announce_default_threads()
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
                               height=args.size[1], event_history_s=args.event_history, threads=threads,
-                              device=args.device)
+                              device=args.device, compiled=args.compile,
+                              precision=args.precision)
         rows = run(spec, args.out, cache=args.cache, weights_dir=weights_dir_from_env(args.weights),
                    progress=not args.no_progress)
     except NeuSpikeError as exc:

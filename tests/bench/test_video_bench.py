@@ -99,3 +99,30 @@ def test_other_jobs_load_marks_the_timings_contended(bench_run, tmp_path, monkey
         assert ("Timings contended" in page) is contended
         if not contended:
             assert "Timings uncontended" in page
+
+
+def test_compile_runs_two_untimed_frames_first_and_changes_no_image(bench_run, tmp_path, monkeypatch):
+    """``--compile``: the method's module goes through torch.compile (replaced here by a recorder that
+    returns the module itself, so the plumbing is tested without the minutes of a real compile; the
+    compiled image itself is tested in tests/neuspike/test_compiled.py); two frames run untimed first,
+    the timed stream starts afresh and its scores are the eager run's."""
+    import torch
+
+    _, cache, _ = bench_run
+    calls = []
+    monkeypatch.setattr(torch, "compile", lambda module, **kw: calls.append(kw) or module)
+    rows = {}
+    for flag in ([], ["--compile"]):
+        out = tmp_path / ("c" if flag else "e")
+        argv = ["--size", "48x32", "--duration", "0.005", "--fps", "2000", "--methods", "firenet-sim",
+                "--precision", "float32", "--cache", str(cache), "--out", str(out), "--no-progress", *flag]
+        assert vb.main(argv) == 0
+        rows[bool(flag)] = pd.read_csv(out / "results.csv").set_index("method").loc["firenet-sim"]
+    assert len(calls) == 1 and calls[0]["options"] == {"freezing": True}
+    eager, compiled = rows[False], rows[True]
+    assert np.isnan(eager["compile_s"]) and compiled["compile_s"] > 0
+    assert compiled["frames"] == eager["frames"] == 10
+    for column in ("mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "steps_per_frame"):
+        assert compiled[column] == eager[column]
+    readme = (tmp_path / "c" / "README.md").read_text()
+    assert "`python -m bench.video --precision float32 --compile`" in readme and "compiled (torch.compile;" in readme
