@@ -96,8 +96,8 @@ class VideoBenchSpec:
     threads: int | None = None
     #: torch device of the learned methods (the others run on the CPU whatever it is)
     device: str = "cpu"
-    #: run the learned methods' networks through ``torch.compile`` (compiled at the first frame, whose
-    #: time then includes the compiling; see :class:`~neuspike.methods.learned.LearnedMethod`)
+    #: run the learned methods' networks through ``torch.compile`` (compiled on two untimed frames
+    #: streamed first, their time the row's ``compile_s``; see :class:`~neuspike.methods.learned.LearnedMethod`)
     compiled: bool = False
     #: precision of the learned methods (``None``: each method's own, ``auto`` for those shipped)
     precision: str | None = None
@@ -436,7 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "faster than float32 on this device)")
     p.add_argument("--compile", action="store_true",
                    help="run the learned methods' networks through torch.compile (weights frozen; needs a C++ "
-                   "compiler); each is compiled on its first frames, whose time is counted (a long video repays it)")
+                   "compiler); each is compiled on two untimed frames streamed first (their time: the row's compile_s), "
+                   "then timed from a fresh start")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
