@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
-from neuspike.utils.cli import WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
+from neuspike.utils.cli import PRECISIONS, WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
 from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -54,6 +54,8 @@ class ReconstructSpec:
     weights: Path | None = None
     gt: Path | None = None
     device: str = "cpu"
+    #: precision of the learned methods (``None``: each method's own, ``auto`` for those shipped)
+    precision: str | None = None
 
 
 @dataclass(frozen=True)
@@ -136,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "the suite's own trained weights ship with it and need no flag")
     p.add_argument("--device", default="cpu",
                    help="torch device of learned methods (default: cpu; e.g. cuda)")
+    p.add_argument("--precision", choices=PRECISIONS,
+                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
+                        "faster than float32 on this device; float32 for numbers that match other machines)")
     p.add_argument("--gt", type=Path, metavar="IMAGE", help="ground-truth image (.png or .npy) for PSNR and SSIM")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     return p
@@ -214,7 +219,7 @@ def _prepare_methods(spec: ReconstructSpec) -> list[Any]:
             raise InputError(f"method {name!r} needs {flags} (it reads {', '.join(sorted(e.inputs))})")
         entries.append(e)
     made = create_many([e.name for e in entries], weights_dir=spec.weights, device=spec.device,
-                       skip_unavailable=False)
+                       precision=spec.precision, skip_unavailable=False)
     return [c.method for c in made.values()]
 
 
@@ -283,6 +288,7 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
         plane=args.plane, at_s=args.at_s, gain=args.gain, dark_rate=args.dark_rate, window_planes=args.window_planes,
         weights=weights_dir_from_env(args.weights), gt=args.gt, device=args.device,
+        precision=args.precision,
     )
 
 

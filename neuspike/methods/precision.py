@@ -25,14 +25,14 @@ from pathlib import Path
 from typing import Any, Callable
 
 from neuspike.utils.atomic import write_json
+from neuspike.utils.cli import PRECISIONS
 from neuspike.utils.jsonio import canonical_json, stable_hash
 from neuspike.utils.resources import cpu_model
 
 __all__ = ["BF16_MARGIN", "PRECISIONS", "cache_path", "choose_precision", "machine_key"]
 
-#: The precisions a learned method runs in (``"auto"`` resolved per device and module); torch-free, so a
-#: command's parser can offer them without importing torch.
-PRECISIONS = ("auto", "float32", "bfloat16")
+# PRECISIONS (the precisions a learned method runs in, ``"auto"`` resolved per device and module) lives in
+# neuspike.utils.cli, so that a command's parser offers them without importing numpy or torch.
 
 #: bfloat16 is chosen only when its step takes at most this fraction of the float32 step.
 BF16_MARGIN = 0.9

@@ -6,7 +6,12 @@ import argparse
 import os
 from pathlib import Path
 
-__all__ = ["UsageError", "ArgumentParser", "WEIGHTS_ENV", "weights_dir_from_env"]
+__all__ = ["UsageError", "ArgumentParser", "PRECISIONS", "WEIGHTS_ENV", "weights_dir_from_env"]
+
+#: The precisions a learned method runs in (``"auto"`` resolved per device and module by
+#: :mod:`neuspike.methods.precision`, which re-exports this): here, so that a command's parser offers
+#: them without importing numpy or torch.
+PRECISIONS = ("auto", "float32", "bfloat16")
 
 #: Environment variable naming the folder of published weights (read by command-line entry points only).
 WEIGHTS_ENV = "NEUSPIKE_WEIGHTS"

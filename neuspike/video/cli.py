@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from neuspike.utils.cli import ArgumentParser, UsageError
+from neuspike.utils.cli import PRECISIONS, ArgumentParser, UsageError
 from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -79,6 +79,10 @@ class VideoSpec:
     dark_rate: float | None = None
     weights: Path | None = None
     device: str = "cpu"
+    #: precision of the learned methods (``None``: each method's own, ``auto`` for those shipped)
+    precision: str | None = None
+    #: run the learned methods' networks through ``torch.compile`` (the first frames pay the compile)
+    compiled: bool = False
     progress: bool = True
 
 
@@ -136,6 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "default: the recording's)")
     p.add_argument("--weights", type=Path, metavar="DIR", help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
     p.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
+    p.add_argument("--precision", choices=PRECISIONS,
+                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
+                        "faster than float32 on this device; float32 for numbers that match other machines)")
+    p.add_argument("--compile", action="store_true",
+                   help="run the learned methods' networks through torch.compile (needs a C++ compiler): the "
+                        "first frames take tens of seconds longer while it compiles, every later frame is faster "
+                        "(a long video's choice; python -m bench.video --compile measures the gain here)")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
@@ -171,7 +182,7 @@ def spec_from_args(args: argparse.Namespace) -> VideoSpec:
         event_history_s=args.event_history,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
         gain=args.gain, dark_rate=args.dark_rate, weights=weights_dir_from_env(args.weights), device=args.device,
-        progress=not args.no_progress,
+        precision=args.precision, compiled=args.compile, progress=not args.no_progress,
     )
 
 
@@ -191,7 +202,7 @@ def _create_methods(spec: VideoSpec, modalities: frozenset[str]) -> list[Any]:
                              f"(it has {', '.join(sorted(modalities))})")
         entries.append(e)
     made = create_many([e.name for e in entries], weights_dir=spec.weights, device=spec.device,
-                       skip_unavailable=False)
+                       precision=spec.precision, compiled=spec.compiled, skip_unavailable=False)
     return [c.method for c in made.values()]
 
 
@@ -443,6 +454,9 @@ def _write(spec: VideoSpec, rec: Any, methods: list[Any], times: np.ndarray, fps
         per_method[m.name] = {
             "inputs": sorted(m.inputs),
             "normalisation": m.last_normalisation,
+            # learned methods: the precision they ran in (``auto`` resolved) and whether compiled
+            "precision": m.params.get("precision"),
+            "compiled": bool(m.params.get("compiled", False)),
             "method_seconds": busy[m.name],
             "method_frames_per_s": n / busy[m.name] if busy[m.name] > 0 else None,
             "scored_frames": len(scored),

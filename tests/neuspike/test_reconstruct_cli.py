@@ -231,3 +231,14 @@ def test_gain_and_dark_rate_given_reach_the_sample_and_a_bad_dark_rate_exits_2(d
     assert "dark rate 0.0055" in capsys.readouterr().out
     rc = main(["--method", SPIKES_NAME, "--spikes", str(path), "--dark-rate", "-1", "--out", str(tmp_path / "o")])
     assert rc == 2 and "dark_rate" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_precision_flag_reaches_the_learned_methods(tmp_path, precision):
+    """``--precision`` overrides a learned method's shipped ``auto``; the method reports what it runs in."""
+    args = build_parser().parse_args(["--events", str(tmp_path / "e.h5"), "--method", "firenet-sim",
+                                      "--precision", precision, "--out", str(tmp_path / "out")])
+    spec = spec_from_args(args)
+    assert spec.precision == precision
+    (method,) = _prepare_methods(spec)
+    assert method.params["precision"] == precision and method.describe()["params"]["precision"] == precision

@@ -360,3 +360,41 @@ def test_tfp_sliding_count_equals_a_full_count(recording, name):
         got = list(reconstruct_video(registry.create(name), rec, times))
     for t, img in got[::3]:
         assert np.array_equal(img, _single(name, spikes, None, t, height=H, width=W)), t
+
+
+def test_command_precision_and_compile_reach_the_learned_method(recording, tmp_path, monkeypatch):
+    """``--precision`` sets the learned method's precision and ``--compile`` sends its network through
+    torch.compile (replaced by a recorder returning the module itself, so the plumbing is tested without
+    a real compile; the compiled image is tested in test_compiled.py): both are recorded in video.json,
+    and a pass-through compile changes no frame."""
+    import torch
+
+    folder, _ = recording
+    calls = []
+    monkeypatch.setattr(torch, "compile", lambda module, **kw: calls.append(kw) or module)
+    runs = {}
+    for flags in ([], ["--compile"]):
+        out = tmp_path / ("compiled" if flags else "eager")
+        assert _run("--events", folder / "events.h5", "--method", "firenet-sim", "--precision", "float32",
+                    "--fps", 10_000, "--start", 0, "--end", "0.0005", "--frames", "npy", "--out", out,
+                    "--no-progress", *flags) == 0
+        runs[bool(flags)] = out
+    assert len(calls) == 1 and calls[0]["options"] == {"freezing": True}
+    for compiled, out in runs.items():
+        summary = json.loads((out / "video.json").read_text())
+        assert summary["spec"]["precision"] == "float32" and summary["spec"]["compiled"] is compiled
+        assert summary["methods"]["firenet-sim"]["precision"] == "float32"
+        assert summary["methods"]["firenet-sim"]["compiled"] is compiled
+    frames = sorted((runs[False] / "firenet-sim").glob("frame_*.npy"))
+    assert len(frames) == 5
+    for f in frames:
+        assert np.array_equal(np.load(f), np.load(runs[True] / "firenet-sim" / f.name))
+
+
+def test_command_refuses_an_unknown_precision(recording, tmp_path, capsys):
+    folder, _ = recording
+    code = _run("--events", folder / "events.h5", "--method", "firenet-sim", "--precision", "float16",
+                "--out", tmp_path / "out", "--no-progress")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--precision" in err[0] and "float16" in err[0], err
+    assert not (tmp_path / "out").exists()
