@@ -470,7 +470,7 @@ class SequenceTask:
 
     @property
     def shard_dir(self) -> Path:
-        return Path(self.data.shard_root) / self.data.key()
+        return Path(self.data.shard_root) / self.data.key(self.spec.seed)
 
     def shard_folders(self) -> list[Path]:
         return [self.shard_dir]
@@ -513,6 +513,6 @@ class SequenceTask:
         return name, self.module.state_dict(), dict(self.method.params)
 
     def describe_data(self) -> dict[str, Any]:
-        return {"simulator": "neuspike.simulation.cell.simulate_sample", "kind": "sequences", "shard": self.data.key(),
+        return {"simulator": "neuspike.simulation.cell.simulate_sample", "kind": "sequences", "shard": self.data.key(self.spec.seed),
                 "train_items": self.data.train_items, "val_items": self.data.val_items,
                 "photos": list(self.data.photos), "kinds": list(self.data.kinds)}

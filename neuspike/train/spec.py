@@ -317,12 +317,17 @@ class SequenceData:
             raise InputError("history: the second pass needs sequences of at least 2 windows (length >= 2)")
 
     def key(self, seed: int | None = None) -> str:
-        """The shard folder's name: a hash of what an item is (not of the seed, counts or scoring).
+        """The shard folder's name: a hash of what an item is (not of the counts or scoring).
 
-        ``view``, ``hdr_fraction`` and ``view_fraction`` are left out at their defaults, so shards made before those
-        fields existed keep their key (the default data: ``f40df6737f28``).
+        Item ``i`` is drawn from ``derive_rng(seed, ...)``, so the training seed is part of what an item is:
+        a seed other than 0 enters the hash (seed 0 and ``None`` leave it out, so the shards every stage
+        trained on keep their key). ``view``, ``hdr_fraction`` and ``view_fraction`` are left out at their
+        defaults, so shards made before those fields existed keep their key (the default data:
+        ``f40df6737f28``).
         """
         d = {k: v for k, v in asdict(self).items() if k in self.KEY_FIELDS}
+        if seed:
+            d["seed"] = int(seed)
         if d["view"] is None:
             del d["view"]
         if d["hdr_fraction"] == 0.5:

@@ -461,3 +461,20 @@ def test_history_term_adds_the_gap_between_a_full_and_a_restarted_pass(tiny):
     assert losses[2.0] - losses[0.0] == pytest.approx(2.0 * gap, rel=1e-4, abs=1e-6)
     with pytest.raises(InputError, match="history"):
         DataSpec(history=-1.0)
+
+
+def test_runs_with_different_seeds_never_share_a_shard():
+    """Item i is drawn from ``derive_rng(seed, ...)``, so a run with another seed must not reuse (and
+    silently train on) the items a seed-0 run left in the shard root; seed 0 keeps the old folder names."""
+    from neuspike.train.sequences import SequenceTask
+
+    data = DataSpec(size=40, windows=4, length=4)
+    dirs = {}
+    for seed in (0, 1, 2):
+        spec = TrainSpec(method="firenet-sim", data=data, out_dir="unused", crop=24, batch=1, steps=1,
+                         precision="float32", threads=None, seed=seed)
+        dirs[seed] = SequenceTask(spec, training_method("firenet-sim")).shard_dir
+    assert dirs[0].name == data.key() == data.key(0)  # the shards every earlier stage trained on
+    assert len(set(dirs.values())) == 3
+    cells = [draw_cell(data, derive_rng(seed, "sequences", "train", 0)) for seed in (0, 1)]
+    assert cells[0] != cells[1]  # what the seed changes: the items themselves
