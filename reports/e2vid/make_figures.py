@@ -15,9 +15,14 @@ snapshots of stages 5 and 6 (both from stage 2's weights), of stage 7 (from stag
 stage 8 (from stage 7's step 300; its steps are larger: batch 8 of 112-pixel crops against 4 of 48) and of
 stage 9 (from stage 8's step 500), of stage 10 (from stage 9's step 400) and of stage 11 (from stage
 10's step 200), with the published FireNet for orientation.
+The fourth panel is the measure weights are chosen by since stage 18: the held-out harness
+(``candidates/score.py --heldout``: 68 cells on pictures no network here trains on), by group, for
+each stage scored on it and the published FireNet. Stages 12 to 16 were chosen on harnesses that
+held training photographs; their figures are in ``README.md`` and ``candidates/README.md``.
 Writes training_curves.png.
 """
 
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -41,7 +46,7 @@ def val(name: str, offset: int = 0) -> pd.DataFrame:
     return log.assign(step=log.step + offset)
 
 
-fig, (ax, ax3, axh) = plt.subplots(1, 3, figsize=(16, 3.8))
+fig, ((ax, ax3), (axh, axs)) = plt.subplots(2, 2, figsize=(14, 8))
 fs = val("firenet-sim_train_log.csv")
 ax.plot(fs.step, fs.val_ssim, "-", label="firenet-sim, stage 1")
 s1 = val("e2vid_train_log.csv")
@@ -90,6 +95,26 @@ axh.set_xlabel("optimiser steps after stage 2's weights")
 axh.set_ylabel("harness SSIM")
 axh.set_title("sweep harness on training photographs, 400x250 (16 cells)", fontsize=9)
 axh.legend(fontsize=8)
+sys.path.insert(0, str(here / "candidates"))
+from score import load, score  # noqa: E402
+
+held = score(load([str(here / "candidates" / f) for f in ("results.csv.gz", "flat.csv.gz")]), heldout=True)
+held = held[held.note == ""]
+order = sorted((m for m in held.index if m.startswith("e2vid-s")), key=lambda m: int(m.split("-")[1][1:]))
+order += [m for m in ("firenet",) if m in held.index]
+groups = ["leaves", "noisy_leaves", "flat", "score"]
+width = 0.8 / len(order)
+for i, m in enumerate(order):
+    stage = "published firenet" if m == "firenet" else f"stage {m.split('-')[1][1:]} (step {int(m.split('-')[2])})"
+    xs = [g + (i - (len(order) - 1) / 2) * width for g in range(len(groups))]
+    bars = axs.bar(xs, [held.loc[m, g] for g in groups], width, label=stage,
+                   color="grey" if m == "firenet" else f"C{i}")
+    axs.bar_label(bars, fmt="%.3f", fontsize=6, rotation=90, padding=2)
+axs.set_xticks(range(len(groups)), ["dead leaves (32)", "noisy dead leaves (12)", "flat pictures (24)", "score"])
+axs.set_ylim(0.3, 0.7)
+axs.set_ylabel("held-out harness SSIM")
+axs.set_title("held-out harness, 400x250 (68 cells, pictures no network here trains on)", fontsize=9)
+axs.legend(fontsize=8, loc="upper left")
 fig.tight_layout()
 fig.savefig(here / "training_curves.png", dpi=120)
 print(f"best: firenet-sim {fs.val_ssim.max():.3f}, e2vid stage 1 {s1.val_ssim.max():.3f}, "
