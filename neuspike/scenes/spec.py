@@ -144,6 +144,11 @@ class SceneSpec:
         e.g. a 128x128 training crop of a 400x250 scene; its pixels equal those of the full view
         exactly, and only they are computed. ``None`` renders the whole view. Kinds
         :data:`CROP_KINDS` only.
+    leaf_min_radius : float or None
+        ``"dead_leaves"`` only: the smallest background leaf's radius as a fraction of the view's
+        shorter side, in (0, 0.3). ``None`` (the default) paints the classic scale-invariant picture
+        (radii from 1.5 px, hundreds of leaves); a value paints tens of leaves from that radius up, so
+        the picture has wide uniform regions (the texture and the shading stay).
     effects : tuple of Effect
         Sensor effects this scene calls for (the simulators run them); no effect on rendering.
     seed : int
@@ -172,6 +177,7 @@ class SceneSpec:
     peak: float = 1.0
     upsample: int | None = None
     crop: tuple[int, int, int, int] | None = None
+    leaf_min_radius: float | None = None
     effects: tuple[Effect, ...] = field(default=())
     seed: int = 0
 
@@ -234,6 +240,13 @@ class SceneSpec:
         put(self, "peak", peak)
         if self.crop is not None:
             put(self, "crop", _crop(self.crop, self.kind, self.size))
+        if self.leaf_min_radius is not None:
+            if self.kind != "dead_leaves":
+                raise InputError(f"leaf_min_radius: only a 'dead_leaves' scene takes it, got kind {self.kind!r}")
+            r = _number("leaf_min_radius", self.leaf_min_radius)
+            if not 0 < r < 0.3:
+                raise InputError(f"leaf_min_radius: expected a fraction of the shorter side in (0, 0.3), got {r!r}")
+            put(self, "leaf_min_radius", r)
         try:
             effects = tuple(self.effects)
         except TypeError:
@@ -252,8 +265,9 @@ class SceneSpec:
         """The fields as JSON-serialisable data (effects as dicts, pairs as lists)."""
         out = asdict(self)
         out["effects"] = [e.as_dict() for e in self.effects]
-        if out["crop"] is None:  # absent rather than null: the dict (and what is derived from it,
-            del out["crop"]      # cell seeds, cache keys) stays that of a spec without the field
+        for key in ("crop", "leaf_min_radius"):
+            if out[key] is None:  # absent rather than null: the dict (and what is derived from it,
+                del out[key]      # cell seeds, cache keys) stays that of a spec without the field
         for key in ("size", "velocity_px_s", "focus", "crop"):
             if out.get(key) is not None:
                 out[key] = list(out[key])

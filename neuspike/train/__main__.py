@@ -137,7 +137,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "the sweeps' scale); default: the photograph fitted to the item itself")
     d.add_argument("--length", type=int, help="sequences: windows per training sequence (<= --windows)")
     d.add_argument("--kinds", metavar="K1,K2,...",
-                   help="sequences: scene kinds drawn, from pan,zoom,fan,dead_leaves (default pan,zoom,fan)")
+                   help="sequences: scene kinds drawn, from pan,zoom,fan,dead_leaves,broad_leaves (default pan,zoom,fan; "
+                        "broad_leaves: dead leaves with tens of large leaves and wide uniform regions)")
     d.add_argument("--view-fraction", type=float, metavar="F",
                    help="sequences, with --view: share of items cut from the view, the rest fitted whole (default 1)")
     d.add_argument("--hdr-fraction", type=float, metavar="F",

@@ -14,7 +14,8 @@ window ends is known (:func:`neuspike.scenes.motion.backward_flow`).
 
 Data (:func:`draw_cell`): the training photographs only, pan / zoom / fan scenes with random
 direction, speed, zoom rate, focus, rpm and blades, and on request procedural ``dead_leaves``
-scenes, linear or high-dynamic-range radiance (``hdr_fraction`` of the items), motion scale S in
+scenes (``broad_leaves``: the same scene with its smallest leaf drawn in 5-15 % of the item's side,
+so wide uniform regions), linear or high-dynamic-range radiance (``hdr_fraction`` of the items), motion scale S in
 {16, ..., 256}, light L in {1/2, ..., 1/32}, event contrast threshold log-uniform in
 ``threshold_range``, and noise levels drawn uniformly over ``noise_levels``. Items are simulated
 once into a *shard* (``<shard_root>/<key>/``, one ``.npz`` per item, written atomically, resumable)
@@ -87,7 +88,7 @@ def draw_cell(data: SequenceData, rng: np.random.Generator) -> Cell:
     if view is not None:  # drawn only with a view: the draws of a spec without one are unchanged
         x0, y0 = (int(rng.integers(0, v - data.size + 1)) for v in view)
         common["crop"] = (x0, y0, data.size, data.size)
-    if kind in ("pan", "dead_leaves"):
+    if kind in ("pan", "dead_leaves", "broad_leaves"):
         angle = rng.uniform(0, 2 * np.pi)
         speed = float(np.exp(rng.uniform(np.log(1000), np.log(6000))))
         velocity = (speed * np.cos(angle), speed * np.sin(angle))
@@ -95,8 +96,9 @@ def draw_cell(data: SequenceData, rng: np.random.Generator) -> Cell:
             scene = SceneSpec("pan", velocity_px_s=velocity, **common)
         else:  # procedural: no photograph and no larger view to cut from, so drawn at the item's size;
             # the layers' own draws come from the scene seed
+            broad = {} if kind == "dead_leaves" else {"leaf_min_radius": float(rng.uniform(0.05, 0.15))}
             scene = SceneSpec("dead_leaves", size=(data.size, data.size), dynamic_range=dynamic_range,
-                              velocity_px_s=velocity, seed=int(rng.integers(0, 2**31 - 1)))
+                              velocity_px_s=velocity, seed=int(rng.integers(0, 2**31 - 1)), **broad)
     elif kind == "zoom":
         rate = float(rng.uniform(4.0, 20.0) * rng.choice([-1.0, 1.0]))
         focus = tuple(float(v) for v in rng.uniform(0.25, 0.75, 2) * (np.asarray(size) - 1))

@@ -34,7 +34,7 @@ __all__ = [
 KIND_WEIGHTS: dict[str, float] = {"pan": 0.3, "zoom": 0.12, "fan": 0.13, "still": 0.05, "dead_leaves": 0.4}
 #: Scene kinds of sequence items by default, and every kind a sequence item can be drawn from.
 KINDS = ("pan", "zoom", "fan")
-SEQUENCE_KINDS = KINDS + ("dead_leaves",)
+SEQUENCE_KINDS = KINDS + ("dead_leaves", "broad_leaves")  # broad_leaves: dead leaves with wide uniform regions
 #: Motion scales S and light scales L of sequence items.
 MOTIONS = (16, 32, 64, 128, 256)
 LIGHTS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32)

@@ -45,3 +45,27 @@ def test_layers_move_with_their_own_velocities():
 def test_a_video_only_field_is_refused():
     with pytest.raises(InputError, match="video"):
         SceneSpec(kind="dead_leaves", fps=25.0)
+
+
+def test_broad_leaves_have_wide_uniform_regions_and_leave_the_classic_picture_alone():
+    """``leaf_min_radius`` paints tens of large leaves: far fewer edge pixels in the background than the
+    classic picture's; unset, the spec's dict (the root of cell seeds and cache keys) and its bytes are
+    those of a spec made before the field existed."""
+    classic = spec(size=(160, 120))
+    assert "leaf_min_radius" not in classic.as_dict()
+    assert np.array_equal(make_scene(classic).render([0.0]), make_scene(spec(size=(160, 120), leaf_min_radius=None)).render([0.0]))
+
+    def edge_share(s):
+        background = dead_leaves_layers(s)[0][0]
+        gy, gx = np.gradient(background)
+        return float((np.hypot(gx, gy) > 0.05).mean())
+
+    for seed in (1, 2, 3):
+        broad = spec(size=(160, 120), seed=seed, leaf_min_radius=0.1)
+        assert broad.as_dict()["leaf_min_radius"] == 0.1
+        assert edge_share(broad) < 0.5 * edge_share(spec(size=(160, 120), seed=seed))
+    with pytest.raises(InputError, match="leaf_min_radius"):
+        SceneSpec(kind="pan", leaf_min_radius=0.1)
+    for bad in (0.0, 0.3, -0.1):
+        with pytest.raises(InputError, match="leaf_min_radius"):
+            spec(leaf_min_radius=bad)

@@ -478,3 +478,14 @@ def test_runs_with_different_seeds_never_share_a_shard():
     assert len(set(dirs.values())) == 3
     cells = [draw_cell(data, derive_rng(seed, "sequences", "train", 0)) for seed in (0, 1)]
     assert cells[0] != cells[1]  # what the seed changes: the items themselves
+
+
+def test_broad_leaves_items_are_dead_leaves_with_a_drawn_smallest_leaf():
+    """``broad_leaves`` draws a dead-leaves scene whose smallest leaf is 5-15 % of the item's side;
+    ``dead_leaves`` items leave the field unset (their draws are those before the kind existed)."""
+    rng = np.random.default_rng(3)
+    broad = [draw_cell(DataSpec(size=32, kinds=("broad_leaves",)), rng).scene for _ in range(20)]
+    assert all(s.kind == "dead_leaves" and 0.05 <= s.leaf_min_radius <= 0.15 for s in broad)
+    assert len({s.leaf_min_radius for s in broad}) == 20
+    classic = draw_cell(DataSpec(size=32, kinds=("dead_leaves",)), rng).scene
+    assert classic.kind == "dead_leaves" and classic.leaf_min_radius is None
