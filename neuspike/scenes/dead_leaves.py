@@ -95,11 +95,10 @@ def dead_leaves_layers(spec: SceneSpec) -> list[tuple[np.ndarray, np.ndarray | N
     layers = []
     background = np.full((hp, wp), rng.uniform(0.2, 0.8), np.float32)
     if spec.leaf_min_radius is None:  # the classic picture (its draws unchanged)
-        _paint_shapes(rng, background, None, count=int(rng.integers(250, 600)),
-                      r_min=1.5 * _SUPERSAMPLE, r_max=0.3 * short)
+        count, r_min = int(rng.integers(250, 600)), 1.5 * _SUPERSAMPLE
     else:  # broad leaves: tens of shapes from the given radius, wide uniform regions
-        _paint_shapes(rng, background, None, count=int(rng.integers(15, 40)),
-                      r_min=spec.leaf_min_radius * min(width, height) * _SUPERSAMPLE, r_max=0.3 * short)
+        count, r_min = int(rng.integers(15, 40)), spec.leaf_min_radius * min(width, height) * _SUPERSAMPLE
+    _paint_shapes(rng, background, None, count=count, r_min=r_min, r_max=0.3 * short)
     layers.append((background, None, tuple(float(v) for v in spec.velocity_px_s)))
     base_speed = float(np.hypot(*spec.velocity_px_s)) or REFERENCE_SPEED_PX_S
     for _ in range(FOREGROUND_LAYERS):

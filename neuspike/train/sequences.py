@@ -515,6 +515,6 @@ class SequenceTask:
         return name, self.module.state_dict(), dict(self.method.params)
 
     def describe_data(self) -> dict[str, Any]:
-        return {"simulator": "neuspike.simulation.cell.simulate_sample", "kind": "sequences", "shard": self.data.key(self.spec.seed),
+        return {"simulator": "neuspike.simulation.cell.simulate_sample", "kind": "sequences", "shard": self.shard_dir.name,
                 "train_items": self.data.train_items, "val_items": self.data.val_items,
                 "photos": list(self.data.photos), "kinds": list(self.data.kinds)}
