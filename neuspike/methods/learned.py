@@ -22,10 +22,7 @@ base owns what all of them share, written once:
   is faster (:mod:`neuspike.methods.precision`; measured once per machine and module, remembered).
   The choice is ``params["precision"]``, so it appears in ``describe()``, in ``results.csv`` and in
   a sweep's identity. bfloat16 runs the module under autocast; recurrent states stay float32 where
-  the module keeps them so. The weights of the layers autocast runs in bfloat16 (convolutions,
-  linear layers) are stored in bfloat16 once, before the first step (:func:`bfloat16_weights`),
-  instead of being cast again at every step: the same values, so the same images bit for bit, without
-  re-reading every weight in float32 each step (E2VID's 10.7 million per network step).
+  the module keeps them so.
 * **encoding**: :meth:`LearnedMethod.encode` turns a sample into a list of *steps*, each a tuple of
   tensors (1, C, H, W) that is one call of the module. A feed-forward network has one step; a
   recurrent one has one per event window, its state carried from step to step and reset at the start
@@ -51,7 +48,6 @@ from __future__ import annotations
 
 import abc
 import contextlib
-import copy
 import os
 from pathlib import Path
 from typing import Any, ClassVar, Iterator, Sequence
@@ -66,12 +62,7 @@ from neuspike.sample import Sample
 from neuspike.methods.precision import PRECISIONS
 from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
 
-__all__ = ["PRECISIONS", "LearnedMethod", "bfloat16_weights", "native_bfloat16", "resolve_device", "resolve_precision",
-           "synchronize"]
-
-#: Layers whose weights bfloat16 autocast casts to bfloat16 at every call (its lower-precision list).
-BFLOAT16_LAYERS = (nn.Conv1d, nn.Conv2d, nn.Conv3d, nn.ConvTranspose1d, nn.ConvTranspose2d, nn.ConvTranspose3d,
-                   nn.Linear)
+__all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision", "synchronize"]
 
 #: Label of the default read-out: the module's output clamped to [0, 1].
 CLAMP = "clamp"
@@ -127,21 +118,6 @@ def resolve_precision(precision: str, device: torch.device) -> str:
     if device.type == "cuda":
         return "bfloat16" if torch.cuda.is_bf16_supported() else "float32"
     return "float32"
-
-
-def bfloat16_weights(module: nn.Module) -> nn.Module:
-    """Store the weights of ``module``'s convolution and linear layers in bfloat16, in place; returns it.
-
-    Under bfloat16 autocast these layers cast their float32 weights to bfloat16 at every call (the
-    cast is cached only inside one autocast region, and a method enters one per step); stored cast,
-    the call finds them already bfloat16 and skips it. The values are those autocast would make
-    (the same rounding), so the module's outputs under autocast are unchanged bit for bit. Only for
-    inference under autocast: outside it a float32 input would meet bfloat16 weights.
-    """
-    for layer in module.modules():
-        if isinstance(layer, BFLOAT16_LAYERS):
-            layer.to(torch.bfloat16)
-    return module
 
 
 def _compile_failure(exc: BaseException) -> bool:
@@ -212,7 +188,6 @@ class LearnedMethod(Method):
         self.weights_layout: str | None = None
         self._state: Any = None
         self._compiled: Any = None  # the compiled module, built at the first step (compiled=True)
-        self._bfloat16_module: nn.Module | None = None  # the module whose weights were stored in bfloat16
         module = self.build_module()  # every attribute above is set: the hooks may use any of them
         if path is not None:
             self.weights_sha256 = file_sha256(path)
@@ -244,15 +219,11 @@ class LearnedMethod(Method):
             self.precision_measurement = {"choice": "float32", "error": f"no probe step: {type(exc).__name__}"}
             return
 
-        # bfloat16 is timed as it will run: its weights stored in bfloat16 (a copy; self.module stays float32)
-        modules = {"float32": self.module, "bfloat16": bfloat16_weights(copy.deepcopy(self.module))}
-
         def step(precision: str) -> None:
-            module = modules[precision]
             with torch.inference_mode(), contextlib.ExitStack() as stack:
                 if precision == "bfloat16":
                     stack.enter_context(torch.autocast(self.device.type, dtype=torch.bfloat16))
-                out = module(*inputs, None) if self.recurrent else module(*inputs)
+                out = self.module(*inputs, None) if self.recurrent else self.module(*inputs)
                 synchronize(self.device)
                 return out
 
@@ -306,11 +277,7 @@ class LearnedMethod(Method):
             yield
 
     def _runner(self) -> nn.Module | Any:
-        """What a step calls: the module, or (``compiled``) its compiled form, built once. In bfloat16
-        the module's weights are first stored in bfloat16 (:func:`bfloat16_weights`, once per module)."""
-        if self.params["precision"] == "bfloat16" and self._bfloat16_module is not self.module:
-            # a subclass may have replaced self.module after the base's __init__: cast the one that runs
-            self._bfloat16_module = bfloat16_weights(self.module)
+        """What a step calls: the module, or (``compiled``) its compiled form, built once."""
         if not self.params.get("compiled", False):
             return self.module
         if self._compiled is None:

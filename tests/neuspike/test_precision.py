@@ -57,35 +57,3 @@ def test_every_network_can_be_probed_in_both_precisions(monkeypatch, cache, name
     assert "error" not in record, record
     assert record["float32_ms"] > 0 and record["bfloat16_ms"] > 0
     assert method.params["precision"] == record["choice"]
-
-
-
-@pytest.mark.parametrize("name", ["e2vid", "neuspike-net"])
-def test_bfloat16_weights_are_stored_once_and_give_autocast_s_images_bit_for_bit(monkeypatch, name):
-    """In bfloat16 the convolution weights are stored in bfloat16 at the first step (not cast again
-    at every step); the image equals, bit for bit, the float32 module's under bfloat16 autocast,
-    stepped here by hand."""
-    import numpy as np
-    import torch
-
-    from neuspike.methods.learned import BFLOAT16_LAYERS
-
-    monkeypatch.setattr(precision, "PROBE_SIZE", (40, 24))
-    sample = precision.probe_sample()
-    method = create(name, precision="bfloat16")
-    reference = create(name, precision="float32")  # the same weights, kept in float32
-    convs = [m for m in method.module.modules() if isinstance(m, BFLOAT16_LAYERS)]
-    assert convs and all(m.weight.dtype == torch.float32 for m in convs)  # nothing cast before a step
-    image = method.reconstruct(sample)
-    assert all(m.weight.dtype == torch.bfloat16 for m in convs)
-    assert all(p.dtype == torch.float32 for m in reference.module.modules() if isinstance(m, BFLOAT16_LAYERS)
-               for p in m.parameters())
-    state = None
-    with torch.inference_mode(), torch.autocast("cpu", dtype=torch.bfloat16):
-        for inputs in reference.encode(sample):
-            if reference.recurrent:
-                out, state = reference.module(*inputs, state)
-            else:
-                out = reference.module(*inputs)
-    np.testing.assert_array_equal(image, method.to_image(out, sample))
-    np.testing.assert_array_equal(method.reconstruct(sample), image)  # and again, from the stored weights
