@@ -75,13 +75,6 @@ class ConvLSTM(nn.Module):
 
     ``i, f, o = sigmoid(...)``, ``g = tanh(...)``, ``c' = f * c + i * g``, ``h' = o * tanh(c')``.
 
-    Without autograd the activations run in place on the gate convolution's output: one sigmoid over
-    the three sigmoid gates (contiguous channels ``[i, f, o]``), one tanh over ``g``, ``i * g`` into
-    ``i``'s channels, so that a step allocates two state-sized tensors (``c'``, ``h'``) instead of
-    nine. Each element is computed by the same operations in the same order as with autograd, so the
-    two paths agree to the last bit wherever the elementwise kernels do (a vectorised kernel's tail
-    may round a last bit differently; the tests hold them within 1e-6).
-
     Parameters
     ----------
     in_channels : int
@@ -105,19 +98,7 @@ class ConvLSTM(nn.Module):
             zeros = x.new_zeros((x.shape[0], self.hidden_channels, *x.shape[2:]), dtype=torch.float32)
             state = (zeros, zeros)
         h, c = state
-        z = self.gates(torch.cat([x, h.to(x.dtype)], dim=1))
-        k = self.hidden_channels
-        if torch.is_grad_enabled() and z.requires_grad:
-            i, f, o, g = z.chunk(4, dim=1)
-            c = torch.sigmoid(f).to(c.dtype) * c + (torch.sigmoid(i) * torch.tanh(g)).to(c.dtype)
-            h = torch.sigmoid(o).to(c.dtype) * torch.tanh(c)
-            return h, (h, c)
-        z[:, :3 * k].sigmoid_()
-        g = z[:, 3 * k:].tanh_()
-        i, f, o = z[:, :k], z[:, k:2 * k], z[:, 2 * k:3 * k]
-        ig = i.mul_(g).to(c.dtype)
-        c = f.to(c.dtype) * c
-        c.add_(ig)  # f * c + i * g, the same sum as with autograd
-        h = torch.tanh(c)
-        h.mul_(o.to(c.dtype))  # o * tanh(c): the product commutes bit for bit
+        i, f, o, g = self.gates(torch.cat([x, h.to(x.dtype)], dim=1)).chunk(4, dim=1)
+        c = torch.sigmoid(f).to(c.dtype) * c + (torch.sigmoid(i) * torch.tanh(g)).to(c.dtype)
+        h = torch.sigmoid(o).to(c.dtype) * torch.tanh(c)
         return h, (h, c)

@@ -32,7 +32,7 @@ def test_conv_lstm_without_autograd_matches_the_formula_and_leaves_its_state_alo
     slow_h, (_, slow_c) = cell(x, (h, c))  # autograd on: the out-of-place path
     assert slow_h.requires_grad
     assert same_h is fast_h
-    assert torch.equal(h, h0) and torch.equal(c, c0)  # the in-place path writes only into its own tensors
+    assert torch.equal(h, h0) and torch.equal(c, c0)  # a cell never writes into the state it was given
     for got_h, got_c in ((fast_h, fast_c), (slow_h.detach(), slow_c.detach())):
         assert torch.allclose(got_h, want_h, atol=1e-6, rtol=0)
         assert torch.allclose(got_c, want_c, atol=1e-6, rtol=0)
