@@ -15,8 +15,8 @@ def _lstm_by_formula(cell: ConvLSTM, x, h, c):
     return torch.sigmoid(o) * torch.tanh(c_new), c_new
 
 
-@pytest.mark.parametrize("shape", [(1, 3, 8, 16), (2, 5, 7, 13)])  # the second: slices that are not contiguous, odd tails
-def test_conv_lstm_without_autograd_matches_the_formula_and_leaves_its_state_alone(shape):
+@pytest.mark.parametrize("shape", [(1, 3, 8, 16), (2, 5, 7, 13)])  # the second: a batch, odd sizes
+def test_conv_lstm_matches_the_formula_with_and_without_autograd_and_leaves_its_state_alone(shape):
     b, cin, hh, ww = shape
     gen = torch.Generator().manual_seed(3)
     cell = ConvLSTM(cin, 6, 3)
@@ -29,7 +29,7 @@ def test_conv_lstm_without_autograd_matches_the_formula_and_leaves_its_state_alo
     with torch.no_grad():
         want_h, want_c = _lstm_by_formula(cell, x, h, c)
         fast_h, (same_h, fast_c) = cell(x, (h, c))
-    slow_h, (_, slow_c) = cell(x, (h, c))  # autograd on: the out-of-place path
+    slow_h, (_, slow_c) = cell(x, (h, c))  # autograd on, as in training
     assert slow_h.requires_grad
     assert same_h is fast_h
     assert torch.equal(h, h0) and torch.equal(c, c0)  # a cell never writes into the state it was given
