@@ -28,15 +28,15 @@ def test_conv_lstm_matches_the_formula_with_and_without_autograd_and_leaves_its_
     h0, c0 = h.clone(), c.clone()
     with torch.no_grad():
         want_h, want_c = _lstm_by_formula(cell, x, h, c)
-        fast_h, (same_h, fast_c) = cell(x, (h, c))
-    slow_h, (_, slow_c) = cell(x, (h, c))  # autograd on, as in training
-    assert slow_h.requires_grad
-    assert same_h is fast_h
+        nograd_h, (same_h, nograd_c) = cell(x, (h, c))
+    grad_h, (_, grad_c) = cell(x, (h, c))  # autograd on, as in training
+    assert grad_h.requires_grad
+    assert same_h is nograd_h
     assert torch.equal(h, h0) and torch.equal(c, c0)  # a cell never writes into the state it was given
-    for got_h, got_c in ((fast_h, fast_c), (slow_h.detach(), slow_c.detach())):
+    for got_h, got_c in ((nograd_h, nograd_c), (grad_h.detach(), grad_c.detach())):
         assert torch.allclose(got_h, want_h, atol=1e-6, rtol=0)
         assert torch.allclose(got_c, want_c, atol=1e-6, rtol=0)
-    assert torch.allclose(fast_h, slow_h.detach(), atol=1e-6, rtol=0)
+    assert torch.allclose(nograd_h, grad_h.detach(), atol=1e-6, rtol=0)
 
 
 def test_conv_lstm_starts_from_zeros():
