@@ -23,7 +23,7 @@ from torch import nn
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
-from neuspike.nets.network import HEADS, MOTION_GATES, TRANSFORMERS, NeuSpikeNet
+from neuspike.nets.network import HEADS, MOTION_GATES, SUPPORT_CUES, TRANSFORMERS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
                                            spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
@@ -34,9 +34,9 @@ __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod"
 
 #: The parameters that define the module and its inputs (recorded in the weights card and checked).
 ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head", "motion_gate",
-                       "transformer")
+                       "transformer", "support_cue")
 #: What an architecture parameter means when a weights card (written before it existed) lacks it.
-CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed"}
+CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
 #: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
@@ -86,6 +86,10 @@ def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError("motion_gate: the spike-only variant has no motion path to gate; use 'none'")
     if p["transformer"] not in TRANSFORMERS:
         raise InputError(f"transformer: expected one of {TRANSFORMERS}, got {p['transformer']!r}")
+    if p["support_cue"] not in SUPPORT_CUES:
+        raise InputError(f"support_cue: expected one of {SUPPORT_CUES}, got {p['support_cue']!r}")
+    if p["support_cue"] != "none" and p["head"] != "support-count":
+        raise InputError(f"support_cue: {p['support_cue']!r} needs the 'support-count' head, got {p['head']!r}")
     return p
 
 
@@ -129,6 +133,10 @@ class NeuSpikeNetMethod(LearnedMethod):
     transformer : str
         ``"fixed"`` (default; the shipped weights) or ``"learned"``: a learned full-resolution module on
         each representation before its encoder (:class:`~neuspike.nets.network.InputTransformer`).
+    support_cue : str
+        ``"none"`` (default; the shipped weights) or ``"spread"``: statistics of the group counts
+        given to the support head (:class:`~neuspike.nets.network.SupportCue`; ``"support-count"``
+        head only).
     level : str
         ``"counts"`` (default): the image is shifted so that its mean equals the mean radiance
         counted from the spikes (:func:`count_level`), where the sensor's gain and dark rate are
@@ -145,17 +153,18 @@ class NeuSpikeNetMethod(LearnedMethod):
 
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
-                 motion_gate: str = "none", transformer: str = "fixed", level: str = "counts", **learned: Any) -> None:
+                 motion_gate: str = "none", transformer: str = "fixed", support_cue: str = "none",
+                 level: str = "counts", **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
-                           transformer=transformer))
+                           transformer=transformer, support_cue=support_cue))
         if level not in LEVELS:
             raise InputError(f"level: expected one of {LEVELS}, got {level!r}")
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
-                         transformer=transformer, level=level, **learned)
+                         transformer=transformer, support_cue=support_cue, level=level, **learned)
 
     # -- LearnedMethod ----------------------------------------------------------------------------
 
@@ -164,7 +173,8 @@ class NeuSpikeNetMethod(LearnedMethod):
         p = self.params
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
                            event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"),
-                           motion_gate=p.get("motion_gate", "none"), transformer=p.get("transformer", "fixed"))
+                           motion_gate=p.get("motion_gate", "none"), transformer=p.get("transformer", "fixed"),
+                           support_cue=p.get("support_cue", "none"))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W), and with the

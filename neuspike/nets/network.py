@@ -60,6 +60,22 @@ Input transformers (``transformer``; the paper's T_spike and T_event are learned
   so the module is the identity at construction: weights trained with ``"fixed"`` load into a
   ``"learned"`` network and compute exactly what they computed (``STARTS_AS_IDENTITY``).
 
+Support cue (``support_cue``; heads ``"support"`` and ``"support-count"``):
+
+* ``"none"`` (default): the softmax that chooses the temporal support comes from the decoder
+  features alone. Instance normalisation has removed their scale, and nothing in them says how fast
+  a pixel's radiance changes within the window: on fast pans the support does not narrow with speed
+  (``reports/neuspike-net/fast_motion_probe.py``).
+* ``"spread"``: two full-resolution statistics of the 16 group rates, counted in spikes (``n_g =
+  rate_g / q``; ``"support-count"`` only, which has the quantum ``q``): the dispersion
+  ``log1p(var_g n / (mean_g n + 1))`` (near 0 where the radiance is constant, since an
+  integrate-and-fire pixel's group counts differ by about one spike; large where an edge passes
+  within the window) and the change between the window's halves ``log1p(|mean n_8..15 - mean n_0..7|
+  / sqrt(mean n + 1))``. A small module ``conv1x1(relu(conv3x3(cue)))`` (2 -> 16 -> 33 channels, 865
+  parameters) adds its output to the prediction layer's logits and correction. Its last layer starts
+  at zero, so weights trained without it load and compute exactly what they computed
+  (``STARTS_AS_IDENTITY``).
+
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
 to ``F(t, 0) = t``, so the spike-only network is exactly the full one with the motion path silent,
@@ -77,7 +93,7 @@ from neuspike.nets.fusion import make_fusion
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
 __all__ = ["HEADS", "InputTransformer", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
-           "TRANSFORMERS", "pad_to_multiple"]
+           "SUPPORT_CUES", "SupportCue", "TRANSFORMERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
 PAPER_PARAMETERS = 5_985_000
@@ -90,6 +106,8 @@ HEADS = ("tanh", "support", "support-count")
 MOTION_GATES = ("none", "stats")
 #: The input transformers (module docstring).
 TRANSFORMERS = ("fixed", "learned")
+#: The support head's cues (module docstring).
+SUPPORT_CUES = ("none", "spread")
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -179,6 +197,36 @@ class InputTransformer(nn.Module):
         return x + self.out(torch.relu(self.mix(x)))
 
 
+class SupportCue(nn.Module):
+    """The ``"spread"`` cue (module docstring): (rates (B, 16, H, W), quantum (B, 1, H|1, W|1)) ->
+    logits (B, outputs, H, W) added to the prediction layer's; zero at construction."""
+
+    CHANNELS = 2
+    HIDDEN = 16
+    GROUPS = 16
+
+    def __init__(self, outputs: int) -> None:
+        super().__init__()
+        self.mix = nn.Conv2d(self.CHANNELS, self.HIDDEN, 3, padding=1)
+        self.out = nn.Conv2d(self.HIDDEN, outputs, 1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    @classmethod
+    def statistics(cls, rates: torch.Tensor, quantum: torch.Tensor) -> torch.Tensor:
+        """The dispersion and the half-window change of the group counts (module docstring), (B, 2, H, W)."""
+        n = rates.float() / quantum.float()
+        mean = n.mean(dim=1, keepdim=True)
+        dispersion = torch.log1p((n - mean).square().mean(dim=1, keepdim=True) / (mean + 1.0))
+        half = cls.GROUPS // 2
+        change = (n[:, half:].mean(dim=1, keepdim=True) - n[:, :half].mean(dim=1, keepdim=True)).abs()
+        return torch.cat([dispersion, torch.log1p(change / torch.sqrt(mean + 1.0))], dim=1)
+
+    def forward(self, rates: torch.Tensor, quantum: torch.Tensor) -> torch.Tensor:
+        cue = self.statistics(rates, quantum).to(self.mix.weight.dtype)
+        return self.out(torch.relu(self.mix(cue)))
+
+
 class NeuSpikeNet(nn.Module):
     """NeuSpike-Net (module docstring).
 
@@ -200,15 +248,24 @@ class NeuSpikeNet(nn.Module):
     transformer : str
         ``"fixed"`` or ``"learned"`` (:data:`TRANSFORMERS`, module docstring): a learned
         full-resolution module on each representation before its encoder.
+    support_cue : str
+        ``"none"`` or ``"spread"`` (:data:`SUPPORT_CUES`, module docstring): statistics of the group
+        counts that tell the support head where the radiance changes within the window
+        (``"support-count"`` head only).
     """
 
     #: Parts that compute the identity as constructed: weights trained without them start the same network.
-    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.")
+    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.", "support_cue.")
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
                  event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none",
-                 transformer: str = "fixed") -> None:
+                 transformer: str = "fixed", support_cue: str = "none") -> None:
         super().__init__()
+        if support_cue not in SUPPORT_CUES:
+            raise InputError(f"NeuSpikeNet: support_cue must be one of {SUPPORT_CUES}, got {support_cue!r}")
+        if support_cue != "none" and head != "support-count":
+            raise InputError(f"NeuSpikeNet: support_cue {support_cue!r} counts spikes with the quantum, which "
+                             f"only the 'support-count' head takes (head {head!r})")
         if transformer not in TRANSFORMERS:
             raise InputError(f"NeuSpikeNet: transformer must be one of {TRANSFORMERS}, got {transformer!r}")
         if head not in HEADS:
@@ -241,6 +298,8 @@ class NeuSpikeNet(nn.Module):
         if head != "tanh":  # start as the mean of every estimate, no correction
             nn.init.zeros_(self.predict.weight)
             nn.init.zeros_(self.predict.bias)
+        if support_cue == "spread":
+            self.support_cue = SupportCue(outputs)
 
     @property
     def takes_quantum(self) -> bool:
@@ -315,6 +374,8 @@ class NeuSpikeNet(nn.Module):
         d = self.up2(torch.cat([d, s2], dim=1))
         d = self.up3(torch.cat([d, s1], dim=1))
         y = self.predict(torch.cat([d, s0.to(d.dtype)], dim=1))[..., :h, :w]
+        if hasattr(self, "support_cue"):
+            y = y + self.support_cue(spikes[:, : SupportCue.GROUPS, :h, :w], quantum).to(y.dtype)
         if self.head == "tanh":
             return 0.5 * (torch.tanh(y) + 1.0)
         weights = torch.softmax(y[:, 1:].float(), dim=1)

@@ -241,6 +241,63 @@ def test_learned_input_transformers_start_as_the_fixed_network_and_keep_the_fixe
         NeuSpikeNet(transformer="attention")
 
 
+def test_support_cue_starts_as_the_network_without_it_and_reaches_the_support_softmax(one_torch_thread):
+    """``support_cue="spread"`` adds conv3x3(2 -> 16) + conv1x1(16 -> 33) (865 parameters) whose last
+    layer is zero: weights trained without it load and give the same images, for the fusion network
+    and its spike-only variant. Once it is not zero it moves the support; with the prediction layer
+    and the cue's output at zero the image is the mean of the estimates again."""
+    from neuspike.methods.weights import load_state_strict
+
+    torch.manual_seed(7)
+    count = lambda net: sum(p.numel() for p in net.parameters())  # noqa: E731
+    for spike_only, gate in ((False, "stats"), (True, "none")):
+        plain = NeuSpikeNet(head="support-count", motion_gate=gate, spike_only=spike_only).eval()
+        cued = NeuSpikeNet(head="support-count", motion_gate=gate, spike_only=spike_only, support_cue="spread").eval()
+        assert count(cued) - count(plain) == conv(2, 16) + conv(16, 33, k=1) == 865
+        load_state_strict(cued, plain.state_dict(), "plain", may_lack=cued.STARTS_AS_IDENTITY)
+        x, q = torch.rand(2, 32, 20, 36), torch.full((2, 1, 1, 1), 0.02)
+        inputs = (x, q) if spike_only else (x, torch.randn(2, 32, 20, 36), q)
+        with torch.no_grad():
+            for net in (plain, cued):
+                torch.manual_seed(8)
+                net.predict.weight.normal_(0, 0.05)
+            assert torch.equal(cued(*inputs), plain(*inputs))
+            cued.support_cue.out.weight.normal_(0, 0.5)
+            assert not torch.allclose(cued(*inputs), plain(*inputs))
+            cued.predict.weight.zero_()
+            cued.predict.bias.zero_()
+            cued.support_cue.out.weight.zero_()
+            assert torch.allclose(cued(*inputs), x.mean(dim=1, keepdim=True), atol=1e-6)
+    with pytest.raises(InputError, match="support_cue"):
+        NeuSpikeNet(head="support", support_cue="spread")
+    with pytest.raises(InputError, match="support_cue"):
+        NeuSpikeNet(head="support-count", support_cue="edges")
+
+
+def test_support_cue_statistics_in_closed_form():
+    """Counts ``n_g = rate_g / q``: constant counts give no dispersion and no change; counts a in the
+    first half of the window and b in the second (an edge passing at its centre) give
+    log1p(((a - b) / 2)^2 / ((a + b) / 2 + 1)) and log1p(|b - a| / sqrt((a + b) / 2 + 1))."""
+    import math
+
+    from neuspike.nets.network import SupportCue
+
+    q = torch.full((1, 1, 1, 1), 0.05)
+    flat = torch.full((1, 16, 3, 4), 6 * 0.05)
+    assert torch.allclose(SupportCue.statistics(flat, q), torch.zeros(1, 2, 3, 4), atol=1e-6)
+    a, b = 2.0, 10.0
+    step = torch.cat([torch.full((1, 8, 3, 4), a), torch.full((1, 8, 3, 4), b)], dim=1) * 0.05
+    got = SupportCue.statistics(step, q)
+    mean = (a + b) / 2
+    assert torch.allclose(got[:, 0], torch.full((1, 3, 4), math.log1p(((a - b) / 2) ** 2 / (mean + 1))), atol=1e-5)
+    assert torch.allclose(got[:, 1], torch.full((1, 3, 4), math.log1p(abs(b - a) / math.sqrt(mean + 1))), atol=1e-5)
+    # a per-pixel quantum map counts each pixel in its own units
+    qmap = torch.full((1, 1, 3, 4), 0.05)
+    qmap[..., 0, 0] = 0.1
+    got = SupportCue.statistics(step, qmap)
+    assert torch.allclose(got[:, 0, 0, 0], torch.tensor([math.log1p(2.0 ** 2 / (3.0 + 1))]), atol=1e-5)
+
+
 def test_motion_gate_statistics_tell_incoherent_events_from_an_edge():
     """The 3x3 mean keeps 1/sqrt(3) of a straight edge's rms (three columns of 1/3) and about 1/3 of
     sparse isolated events' (nine pixels of 1/9)."""
