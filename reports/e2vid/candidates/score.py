@@ -94,10 +94,16 @@ def score(d: pd.DataFrame, heldout: bool = False) -> pd.DataFrame:
 
 
 def main(argv: list[str]) -> int:
+    if {"-h", "--help"} & set(argv):
+        print(__doc__)
+        return 0
     heldout = "--heldout" in argv
     argv = [a for a in argv if a != "--heldout"]
-    if not argv:
+    unknown = [a for a in argv if a.startswith("-")]
+    if unknown or not argv:
         print(__doc__, file=sys.stderr)
+        if unknown:
+            print(f"error: unknown option(s) {' '.join(unknown)}", file=sys.stderr)
         return 2
     table = score(load(argv), heldout=heldout)
     with pd.option_context("display.float_format", "{:.4f}".format, "display.width", 120):
