@@ -1,6 +1,8 @@
 """Why the fusion network blurs fast pans: its support head and its motion gate, per speed and light.
 
     python reports/neuspike-net/fast_motion_probe.py --photos astronaut,coffee
+    python reports/neuspike-net/fast_motion_probe.py --weights-file runs/nsn-stage22-cue/neuspike-net.safetensors \
+        --support-cue spread        # a candidate (its card must match the design)
 
 On pans of *training* photographs (400x250, S = 256, seed 0, no sensor noise; the test photographs are
 for the fast-motion report only) at 1x, 4x and 16x the sweeps' speed and L = 1/4 and 1/16, one
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -52,9 +55,14 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--photos", default="astronaut,coffee", help="training photographs (comma-separated)")
     p.add_argument("--weights", default="../shared/weights", help="weights folder (the shipped ones are found anyway)")
+    p.add_argument("--weights-file", help="a candidate's fusion weights (.safetensors) instead of the shipped ones")
+    p.add_argument("--support-cue", default="none", choices=("none", "spread"), help="the candidate's support cue")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
-    method = create("neuspike-net", weights_dir=args.weights, precision="float32")
+    folder, extra = args.weights, {}
+    if args.weights_file:
+        folder, extra = str(Path(args.weights_file).parent), {"weights_file": Path(args.weights_file).name}
+    method = create("neuspike-net", weights_dir=folder, precision="float32", support_cue=args.support_cue, **extra)
     net = method.module.float().eval()
     logits: dict[str, torch.Tensor] = {}
     net.predict.register_forward_hook(lambda _m, _i, out: logits.__setitem__("y", out))
