@@ -60,7 +60,7 @@ Input transformers (``transformer``; the paper's T_spike and T_event are learned
   so the module is the identity at construction: weights trained with ``"fixed"`` load into a
   ``"learned"`` network and compute exactly what they computed (``STARTS_AS_IDENTITY``).
 
-Support cue (``support_cue``; heads ``"support"`` and ``"support-count"``):
+Support cue (``support_cue``; the ``"support-count"`` head only):
 
 * ``"none"`` (default): the softmax that chooses the temporal support comes from the decoder
   features alone. Instance normalisation has removed their scale, and nothing in them says how fast
