@@ -306,13 +306,19 @@ class NeuSpikeNet(nn.Module):
         """Whether the inputs end with the spike quantum ``q`` (the ``"support-count"`` head)."""
         return self.head == "support-count"
 
-    def forward(self, spikes: torch.Tensor, *rest: torch.Tensor | None) -> torch.Tensor:
+    def forward(self, spikes: torch.Tensor, *rest: torch.Tensor | None, parts: bool = False
+                ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """(spikes[, events][, quantum]) -> image (B, 1, H, W) (in [0, 1] for the ``"tanh"`` head).
 
         spikes and events are (B, 32, H, W); ``events`` must be given to the full network and
         omitted for the spike-only one; ``quantum`` (the radiance of one spike in a 16-plane group,
         (B, 1, H, W) or (B, 1, 1, 1)) comes last, for the ``"support-count"`` head only.
+        ``parts=True`` (the ``"support"`` heads only) returns ``(image, convex)``, ``convex`` the
+        head's convex combination of the spike estimates before the correction is added
+        (``image = convex + correction``), so a loss can score the chosen temporal support itself.
         """
+        if parts and self.head == "tanh":
+            raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
         rest = list(rest)
         quantum = rest.pop() if self.takes_quantum and rest and (self.spike_only or len(rest) == 2) else None
         events = rest[0] if rest else None
@@ -330,24 +336,27 @@ class NeuSpikeNet(nn.Module):
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
         if self.spike_only:
-            return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w))
+            return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts)
         m = self.motion(pad_to_multiple(self._transform("event_transformer", events)))
         if hasattr(self, "motion_gate"):
             g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
             m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                            t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w))
+                            t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w), parts)
 
-    def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None) -> torch.Tensor:
+    def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None, *,
+                             parts: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """The spike-only network inside this one: the motion path silenced (``F(t, 0) = t``).
 
         spikes: (B, 32, H, W) [, quantum] -> (B, 1, H, W); equals the spike-only module holding the
-        same texture-path, residual and decoder weights.
+        same texture-path, residual and decoder weights. ``parts`` as in :meth:`forward`.
         """
+        if parts and self.head == "tanh":
+            raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
         self._check_inputs(spikes, quantum)
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
-        return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w))
+        return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts)
 
     def _transform(self, name: str, x: torch.Tensor) -> torch.Tensor:
         """The learned input transformer ``name`` applied to ``x``, or ``x`` (``"fixed"``)."""
@@ -368,7 +377,8 @@ class NeuSpikeNet(nn.Module):
             raise InputError(f"NeuSpikeNet: the {self.head!r} head takes no quantum")
 
     def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor,
-                spikes: torch.Tensor, quantum: torch.Tensor | None, size: tuple[int, int]) -> torch.Tensor:
+                spikes: torch.Tensor, quantum: torch.Tensor | None, size: tuple[int, int], parts: bool = False
+                ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         h, w = size
         d = self.up1(self.residual(r))
         d = self.up2(torch.cat([d, s2], dim=1))
@@ -383,4 +393,4 @@ class NeuSpikeNet(nn.Module):
         correction = y[:, :1].float()
         if quantum is not None:
             correction = correction * quantum.float()
-        return support + correction
+        return (support + correction, support) if parts else support + correction

@@ -44,7 +44,7 @@ __all__ = [
 SPEC, CHECKPOINT, LOG = "spec.json", "checkpoint.pt", "train_log.csv"
 CHECKPOINT_FORMAT = 2
 LOG_COLUMNS = ("step", "kind", "variant", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds", "samples_per_s",
-               "wall_s", "val_l1", "val_psnr", "val_ssim", "val_ssim_last")
+               "wall_s", "val_l1", "val_psnr", "val_ssim", "val_ssim_last", "support_l1")
 #: Validation scores of the log (a row of the sequence trainer held them beside the step's loss).
 _VAL_COLUMNS = ("val_l1", "val_psnr", "val_ssim", "val_ssim_last")
 
@@ -204,14 +204,18 @@ def trim_log(out_dir: str | os.PathLike, step: int) -> None:
 
 
 def append_log(out_dir: str | os.PathLike, row: Mapping[str, Any]) -> None:
-    """Append one row (header first in a new log)."""
+    """Append one row (header first in a new log; a log begun with fewer columns keeps its header)."""
     path = Path(out_dir) / LOG
-    new = not path.exists()
+    new = not path.exists() or path.stat().st_size == 0
+    columns = LOG_COLUMNS
+    if not new:
+        with open(path, newline="") as f:
+            columns = tuple(next(csv.reader(f), LOG_COLUMNS))
     with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=LOG_COLUMNS, lineterminator="\n")
+        w = csv.DictWriter(f, fieldnames=columns, lineterminator="\n", extrasaction="ignore")
         if new:
             w.writeheader()
-        w.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
+        w.writerow({k: row.get(k, "") for k in columns})
 
 
 # --- weights and card -----------------------------------------------------------------------------

@@ -127,6 +127,13 @@ class WindowData:
         Adds offset_weight * |mean(output) - mean(truth)| per crop (averaged over the batch): an error
         of the whole image's level, to which the SSIM term is blind and which the per-pixel L1
         weighs no more than any other error. Default 0 (the term is off; earlier specs mean 0).
+    support_weight : float
+        Adds support_weight * the mean absolute error of the support head's convex part (its
+        softmax-weighted combination of the spike estimates, before the correction) against the
+        truth. The total loss never scores the temporal support the head chooses, only the image
+        after the correction, which can undo a support wider than the motion allows; this term
+        rewards a support that is right on its own: wide where the radiance holds still, narrow on
+        moving edges. ``"support"`` heads only. Default 0 (off; earlier specs mean 0).
     spike_only_fraction : float
         Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
         spike-only variant inside the same weights.
@@ -155,6 +162,7 @@ class WindowData:
     ssim_window: int = 11
     spike_only_fraction: float = 0.3
     offset_weight: float = 0.0
+    support_weight: float = 0.0
     val_view: tuple[int, int] | None = None
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
@@ -170,6 +178,10 @@ class WindowData:
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
+        if not (isinstance(self.support_weight, (int, float)) and not isinstance(self.support_weight, bool)
+                and 0.0 <= float(self.support_weight) < math.inf):
+            raise InputError(f"support_weight: expected a finite weight >= 0, got {self.support_weight!r}")
+        put(self, "support_weight", float(self.support_weight))
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

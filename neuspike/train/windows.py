@@ -254,7 +254,8 @@ class WindowTask:
       augmented on the CPU, then moved to the method's device (``method.device``), where the loss and
       the validation run.
     * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1)
-      + ``offset_weight`` * the mean absolute error of each crop's mean level (0 by default).
+      + ``offset_weight`` * the mean absolute error of each crop's mean level + ``support_weight`` *
+      the L1 error of the support head's convex part (both 0 by default).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
@@ -275,6 +276,9 @@ class WindowTask:
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
         self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
+        if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
+            raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
+                             f"to score (give a 'support' or 'support-count' head, or weight 0)")
 
     # -- data --------------------------------------------------------------------------------------
 
@@ -347,20 +351,35 @@ class WindowTask:
         spike = derive_rng(self.spec.seed, "modality", step).random() < self.data.spike_only_fraction
         return "spike" if spike else "fusion"
 
-    def forward(self, inputs: Sequence[torch.Tensor], variant: str) -> torch.Tensor:
+    def forward(self, inputs: Sequence[torch.Tensor], variant: str, *, parts: bool = False
+                ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+        """The network's image for ``variant``; with ``parts``, ``(image, convex part)``."""
+        kw = {"parts": True} if parts else {}
         if variant == "spike":
-            return self.module.forward_texture_only(inputs[0], *inputs[2:])
-        return self.module(*inputs)
+            return self.module.forward_texture_only(inputs[0], *inputs[2:], **kw)
+        return self.module(*inputs, **kw)
 
-    def loss(self, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    def loss(self, pred: torch.Tensor | tuple[torch.Tensor, torch.Tensor], target: torch.Tensor
+             ) -> tuple[torch.Tensor, dict[str, float]]:
+        """The training loss of ``pred`` (an image, or ``(image, convex part)`` with ``support_weight``)."""
+        convex = None
+        if isinstance(pred, tuple):
+            pred, convex = pred
         pred = pred.float()
         l1 = (pred - target).abs().mean()
         ssim = self.ssim_loss(pred, target)
         loss = l1 + self.data.ssim_weight * ssim
+        parts = {"l1": l1.item(), "ssim_loss": ssim.item()}
         if self.data.offset_weight:
             offset = (pred.mean(dim=(-2, -1)) - target.mean(dim=(-2, -1))).abs().mean()
             loss = loss + self.data.offset_weight * offset
-        return loss, {"l1": l1.item(), "ssim_loss": ssim.item()}
+        if self.data.support_weight:
+            if convex is None:
+                raise InputError("support_weight: the loss needs the convex part (forward with parts=True)")
+            support_l1 = (convex.float() - target).abs().mean()
+            loss = loss + self.data.support_weight * support_l1
+            parts["support_l1"] = support_l1.item()
+        return loss, parts
 
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
         """The loss of step ``step`` (its batch, variant and forward pass) and what the log records."""
@@ -372,7 +391,7 @@ class WindowTask:
         t_data = time.perf_counter() - t0
         inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
         with autocast():
-            pred = self.forward(inputs, variant)
+            pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
         loss, parts = self.loss(pred, target)
         return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
 

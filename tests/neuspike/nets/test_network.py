@@ -147,6 +147,34 @@ def test_support_count_head_counts_its_correction_in_spikes(one_torch_thread):
                 assert torch.allclose(net.forward_texture_only(x, q), alone(x, q), atol=1e-6)
 
 
+def test_parts_return_the_image_and_the_convex_part_it_adds_the_correction_to(one_torch_thread):
+    """``parts=True`` gives ``(image, convex)``: the same image as without it, ``convex`` the softmax-weighted
+    estimates (inside their per-pixel range), their difference the correction; the tanh head refuses."""
+    torch.manual_seed(6)
+    net = NeuSpikeNet(head="support-count").eval()
+    x = torch.rand(2, 32, 17, 22) * 2.0
+    e = torch.randn_like(x)
+    q = torch.tensor([0.5, 2.0]).view(2, 1, 1, 1)
+    with torch.no_grad():
+        net.predict.weight.normal_(0.0, 0.5)
+        net.predict.bias[0] = 0.5  # half a spike per group of correction
+        image, convex = net(x, e, q, parts=True)
+        assert torch.equal(image, net(x, e, q))
+        lo, hi = x.min(dim=1, keepdim=True).values, x.max(dim=1, keepdim=True).values
+        assert bool(((convex >= lo - 1e-5) & (convex <= hi + 1e-5)).all())
+        assert not torch.allclose(convex, x.mean(dim=1, keepdim=True), atol=1e-3)
+        net.predict.weight[0].zero_()  # a correction of exactly half a spike: image - convex = 0.5 q
+        image, convex = net(x, e, q, parts=True)
+        assert torch.allclose(image - convex, 0.5 * q.expand_as(image), atol=1e-5)
+        alone, alone_convex = net.forward_texture_only(x, q, parts=True)
+        assert torch.equal(alone, net.forward_texture_only(x, q))
+        assert alone_convex.shape == (2, 1, 17, 22)
+    with pytest.raises(InputError, match="parts"):
+        NeuSpikeNet(head="tanh")(x, e, parts=True)
+    with pytest.raises(InputError, match="parts"):
+        NeuSpikeNet(head="tanh").forward_texture_only(x, parts=True)
+
+
 def test_support_count_head_inputs_are_checked():
     x = torch.rand(1, 32, 16, 16)
     count, support = NeuSpikeNet(head="support-count", spike_only=True), NeuSpikeNet(head="support", spike_only=True)

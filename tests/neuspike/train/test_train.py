@@ -253,6 +253,48 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     assert spec_from_dict(earlier).data.offset_weight == 0.0
 
 
+def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_path, one_torch_thread):
+    """support_weight w adds w * L1(convex part, truth) to the loss (computed by hand here), logs it,
+    keeps the shard key and old specs (0), is refused for a tanh head and for bad weights; a run with
+    it trains and its log keeps the column."""
+    from neuspike.methods import create
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    method = create("neuspike-net", precision="float32")
+    gen = torch.Generator().manual_seed(1)
+    target = torch.rand(2, 1, 24, 24, generator=gen)
+    image = target + 0.05 * torch.randn(2, 1, 24, 24, generator=gen)
+    convex = target + 0.2 * torch.randn(2, 1, 24, 24, generator=gen)
+    tasks = {w: WindowTask(TrainSpec(data=WindowData(support_weight=w)), method) for w in (0.0, 0.5)}
+    base, _ = tasks[0.0].loss(image, target)
+    with_term, parts = tasks[0.5].loss((image, convex), target)
+    by_hand = float((convex - target).abs().mean())
+    assert parts["support_l1"] == pytest.approx(by_hand, rel=1e-6)
+    assert float(with_term - base) == pytest.approx(0.5 * by_hand, rel=1e-5)
+    with pytest.raises(InputError, match="convex part"):
+        tasks[0.5].loss(image, target)
+    for bad in (-0.1, float("nan"), float("inf"), "1", True):
+        with pytest.raises(InputError, match="support_weight"):
+            WindowData(support_weight=bad)
+    assert WindowData(support_weight=0.5).key(0) == WindowData().key(0)
+    earlier = TrainSpec(data=WindowData()).as_dict()
+    del earlier["data"]["support_weight"]
+    assert spec_from_dict(earlier).data.support_weight == 0.0
+    from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
+
+    tanh = NeuSpikeNetMethod.for_training("neuspike-net", **{**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"})
+    with pytest.raises(InputError, match="support_weight"):
+        WindowTask(TrainSpec(data=WindowData(support_weight=0.5)), tanh)
+
+    trainer = Trainer(tiny_spec(tmp_path, support_weight=0.5, steps=2, val_every=2), quiet=True)
+    trainer.run()
+    log = (tmp_path / "run" / "train_log.csv").read_text().splitlines()
+    assert "support_l1" in log[0].split(",")
+    rows = [r for r in log[1:] if ",train," in r]
+    assert rows and all(r.split(",")[log[0].split(",").index("support_l1")] != "" for r in rows)
+
+
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
     """``val_view`` makes only the validation windows WxH (the sweeps' frame); the training windows,
     their draws and the key of a shard without it are what they were; a run validates on them."""
