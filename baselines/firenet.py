@@ -240,6 +240,15 @@ class FireNet(LearnedMethod):
         Events per window per pixel (default 0.35).
     max_windows : int
         Most recent windows used for warm-up and output (default 24).
+    read_out : {"key", "window"}
+        What a streamed frame (:meth:`reconstruct_next`) shows. ``"key"`` (default): the scene at the
+        frame's key instant; the events after the last full window are stepped as a partial window
+        without committing it, which costs one network step a frame beyond the full windows.
+        ``"window"``: the output of the last full window, which may end before the key instant (by
+        at most one window's duration; the label says by how much); a frame steps only the windows
+        completed since the previous one, and a frame that completes none repeats the last image
+        at no network cost. A fresh reconstruction is the same either way (its last window ends at
+        the key instant).
     weights_file, weights_dir, device, precision
         As for every :class:`~neuspike.methods.learned.LearnedMethod`; ``weights_file`` is
         ``"firenet.pt"`` or ``"firenet_plus.pt"`` (published, ``.pt``).
@@ -253,15 +262,21 @@ class FireNet(LearnedMethod):
     inputs = frozenset({"events"})
     recurrent = True
 
+    #: The values of ``read_out`` (class docstring).
+    READ_OUTS = ("key", "window")
+
     def __init__(self, name: str | None = None, *, normalize: bool, events_per_pixel: float = 0.35,
-                 max_windows: int = 24, **learned: Any) -> None:
+                 max_windows: int = 24, read_out: str = "key", **learned: Any) -> None:
         if not isinstance(normalize, bool):
             raise InputError(f"normalize: expected True or False, got {normalize!r}")
+        if read_out not in self.READ_OUTS:
+            raise InputError(f"read_out: expected one of {self.READ_OUTS}, got {read_out!r}")
         super().__init__(
             name,
             normalize=normalize,
             events_per_pixel=check_positive("events_per_pixel", events_per_pixel),
             max_windows=check_positive_int("max_windows", max_windows),
+            read_out=read_out,
             **learned,
         )
         self.module = self.module.to(memory_format=torch.channels_last)
@@ -347,7 +362,8 @@ class FireNet(LearnedMethod):
         ``events_per_pixel * H * W`` events counted forward, each stepped and committed; the
         remaining events up to the key instant are stepped on the committed state without committing
         it, and give the output. A frame thus costs its full windows plus at most one step, whatever
-        the frame rate. The frame warms up afresh (as :meth:`reconstruct`) when time went back, when
+        the frame rate. With ``read_out="window"`` the remaining events wait for the next frame and
+        the output is the last full window's (the previous image when none completed). The frame warms up afresh (as :meth:`reconstruct`) when time went back, when
         more than ``max_windows`` windows are pending, or after :meth:`reset`. Events must reach back
         to the previous frame (the video stream's event history does).
         """
@@ -364,7 +380,10 @@ class FireNet(LearnedMethod):
             image = self._continue(sample, *carried)
             if image is not None:
                 self.windows_seen = seen + self._committed
-                return image, self._warm_up_label()
+                label = self._warm_up_label()
+                if self.params["read_out"] == "window":
+                    label += f"; read out at the last full window, {1e3 * self._lag_s:.3g} ms before the key instant"
+                return image, label
         image, label = super()._reconstruct(sample)
         self._carried = (self._state, sample.key_time_s, image)
         self.windows_seen = self.last_steps
@@ -406,6 +425,9 @@ class FireNet(LearnedMethod):
         self._carried = (self._state, t0, image)
         self._committed = full
         self.last_steps = full
+        self._lag_s = key - t0
+        if self.params["read_out"] == "window":  # the rest waits for the next frame
+            return image
         if i0 + full * per < i1:  # the partial window: stepped, not committed
             committed = self._state
             image = step(i0 + full * per, i1, t0, key)

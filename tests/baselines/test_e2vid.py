@@ -11,6 +11,7 @@ import torch
 from baselines.e2vid import PARAMETERS, E2VID, E2VIDModule
 from baselines.firenet import FireNet, FireNetModule
 from neuspike.conditions import Condition
+from neuspike.errors import InputError
 from neuspike.methods import create, entry
 from neuspike.scenes import SceneSpec
 from neuspike.simulation.cell import simulate_sample
@@ -194,6 +195,54 @@ def test_streamed_state_equals_a_from_scratch_run_over_the_same_windows():
         out, state = module(grid(j, j + per, k2, float(t[j + per])), state)
         out, _ = module(grid(j + per, j + per + per // 2, float(t[j + per]), k3), state)
         np.testing.assert_array_equal(images[2], out[0, 0].numpy())
+
+
+def test_read_out_at_the_last_full_window_steps_only_the_completed_windows():
+    """read_out="window": a streamed frame steps only the windows completed since the previous frame
+    and shows the last one's output (the "key" read-out's image before its partial step), says how
+    far before the key instant it is, repeats the last image when no window completed, and is the
+    same as "key" when a frame ends on a window's end; a bad value is refused."""
+    from neuspike.streams import EventStream
+
+    rng = np.random.default_rng(7)
+    h, w, n = 24, 32, 12_000
+    ev = EventStream(np.sort(rng.uniform(0.0, 0.05, n)), rng.integers(0, w, n), rng.integers(0, h, n),
+                     rng.choice(np.array([-1, 1], np.int8), n), w, h)
+    per = int(round(0.35 * h * w))
+    t = ev.t_s
+    k1 = float(t[8 * per] + t[8 * per + 1]) / 2
+    i1 = int(np.searchsorted(t, k1))
+    k2 = float(t[i1 + 2 * per])                    # two full windows after frame 1, none partial
+    k3 = float(t[i1 + 3 * per + per // 2])         # one full window and half of the next
+    k4 = float(t[i1 + 3 * per + 3 * per // 4])     # no window completed since frame 3
+    frames = [(k1, None), (k2, k1), (k3, k2), (k4, k3)]
+    out = {}
+    for read_out in ("key", "window"):
+        method = create("e2vid", precision="float32", max_windows=6, read_out=read_out)
+        images, steps, labels = [], [], []
+        for key, prev in frames:
+            s = _events_sample(ev, key)
+            images.append(method.reconstruct(s) if prev is None else method.reconstruct_next(s, previous_s=prev))
+            steps.append(method.last_steps)
+            labels.append(method.last_normalisation)
+        out[read_out] = images, steps, labels
+    (key_img, key_steps, _), (win_img, win_steps, win_labels) = out["key"], out["window"]
+    assert key_steps == [6, 2, 2, 1] and win_steps == [6, 2, 1, 0]
+    np.testing.assert_array_equal(win_img[0], key_img[0])  # a fresh frame ends on the key instant
+    np.testing.assert_array_equal(win_img[1], key_img[1])  # so does a frame on a window's end
+    assert "read out at the last full window, 0 ms" in win_labels[1]
+    # frame 3: the full window's output, which "key" computed and then stepped past
+    reference = create("e2vid", precision="float32", max_windows=6)
+    reference.reconstruct(_events_sample(ev, k1))
+    reference.reconstruct_next(_events_sample(ev, k2), previous_s=k1)
+    k_full = float(t[i1 + 3 * per])
+    np.testing.assert_array_equal(win_img[2], reference.reconstruct_next(_events_sample(ev, k_full), previous_s=k2))
+    assert not np.array_equal(win_img[2], key_img[2])
+    lag_ms = 1e3 * (k3 - float(t[i1 + 3 * per]))
+    assert f"{lag_ms:.3g} ms before the key instant" in win_labels[2]
+    np.testing.assert_array_equal(win_img[3], win_img[2])  # nothing completed: the same image, no step
+    with pytest.raises(InputError, match="read_out"):
+        create("e2vid", precision="float32", read_out="partial")
 
 
 def test_a_short_history_is_said_in_the_label():
