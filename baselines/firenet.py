@@ -363,9 +363,10 @@ class FireNet(LearnedMethod):
         remaining events up to the key instant are stepped on the committed state without committing
         it, and give the output. A frame thus costs its full windows plus at most one step, whatever
         the frame rate. With ``read_out="window"`` the remaining events wait for the next frame and
-        the output is the last full window's (the previous image when none completed). The frame warms up afresh (as :meth:`reconstruct`) when time went back, when
-        more than ``max_windows`` windows are pending, or after :meth:`reset`. Events must reach back
-        to the previous frame (the video stream's event history does).
+        the output is the last full window's (the previous image when none completed). The frame
+        warms up afresh (as :meth:`reconstruct`) when time went back, when more than ``max_windows``
+        windows are pending, or after :meth:`reset`. Events must reach back to the previous frame
+        (the video stream's event history does).
         """
         self._next_from = previous_s
         try:

@@ -317,15 +317,13 @@ class NeuSpikeNet(nn.Module):
         head's convex combination of the spike estimates before the correction is added
         (``image = convex + correction``), so a loss can score the chosen temporal support itself.
         """
-        if parts and self.head == "tanh":
-            raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
         rest = list(rest)
         quantum = rest.pop() if self.takes_quantum and rest and (self.spike_only or len(rest) == 2) else None
         events = rest[0] if rest else None
         if len(rest) > 1:
             raise InputError(f"NeuSpikeNet: {len(rest) + 1 + (quantum is not None)} inputs given, expected at most "
                              f"{1 + (not self.spike_only) + self.takes_quantum}")
-        self._check_inputs(spikes, quantum)
+        self._check_inputs(spikes, quantum, parts)
         if self.spike_only and events is not None:
             raise InputError("NeuSpikeNet: the spike-only network takes no events")
         if not self.spike_only:
@@ -351,9 +349,7 @@ class NeuSpikeNet(nn.Module):
         spikes: (B, 32, H, W) [, quantum] -> (B, 1, H, W); equals the spike-only module holding the
         same texture-path, residual and decoder weights. ``parts`` as in :meth:`forward`.
         """
-        if parts and self.head == "tanh":
-            raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
-        self._check_inputs(spikes, quantum)
+        self._check_inputs(spikes, quantum, parts)
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
         return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts)
@@ -363,7 +359,9 @@ class NeuSpikeNet(nn.Module):
         module = getattr(self, name, None)
         return x if module is None else module(x)
 
-    def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None) -> None:
+    def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None, parts: bool = False) -> None:
+        if parts and self.head == "tanh":
+            raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
         if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
             raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
         if self.takes_quantum:

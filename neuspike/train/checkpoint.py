@@ -204,18 +204,14 @@ def trim_log(out_dir: str | os.PathLike, step: int) -> None:
 
 
 def append_log(out_dir: str | os.PathLike, row: Mapping[str, Any]) -> None:
-    """Append one row (header first in a new log; a log begun with fewer columns keeps its header)."""
+    """Append one row (header first in a new log)."""
     path = Path(out_dir) / LOG
-    new = not path.exists() or path.stat().st_size == 0
-    columns = LOG_COLUMNS
-    if not new:
-        with open(path, newline="") as f:
-            columns = tuple(next(csv.reader(f), LOG_COLUMNS))
+    new = not path.exists()
     with open(path, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns, lineterminator="\n", extrasaction="ignore")
+        w = csv.DictWriter(f, fieldnames=LOG_COLUMNS, lineterminator="\n")
         if new:
             w.writeheader()
-        w.writerow({k: row.get(k, "") for k in columns})
+        w.writerow({k: row.get(k, "") for k in LOG_COLUMNS})
 
 
 # --- weights and card -----------------------------------------------------------------------------
