@@ -296,6 +296,11 @@ def uses_device(e: MethodEntry) -> bool:
     return e.weights is not None
 
 
+def reads_windows(e: MethodEntry) -> bool:
+    """Whether the method of ``e`` streams fixed-count event windows and so takes ``read_out``."""
+    return bool(getattr(e.factory, "READ_OUTS", ()))
+
+
 def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, ...]") -> None:
     """Refuse a ``device`` that none of ``entries`` can use, before any method is built.
 
@@ -322,7 +327,8 @@ def check_device(device: str, entries: "list[MethodEntry] | tuple[MethodEntry, .
 
 def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.PathLike | None = None,
                 device: str = "cpu", precision: str | None = None, compiled: bool = False,
-                skip_unavailable: bool = True, keep_errors: bool = False) -> dict[str, Created]:
+                read_out: str | None = None, skip_unavailable: bool = True,
+                keep_errors: bool = False) -> dict[str, Created]:
     """Create each of ``names`` once, the way every front end does (commands, sweeps, timings).
 
     Every name is looked up and the device checked (:func:`check_device`) before anything is built,
@@ -340,6 +346,11 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
     compiled : bool
         Run every learned method's module through ``torch.compile`` (:class:`~neuspike.methods.learned.LearnedMethod`);
         the others ignore it.
+    read_out : str or None
+        What a streamed frame of the methods that read fixed-count event windows shows
+        (``read_out`` of :class:`baselines.firenet.FireNet`: ``"key"`` or ``"window"``); ``None``
+        keeps each one's own (``"key"``). The other methods ignore it; an :class:`InputError` when
+        none of ``names`` takes it.
     skip_unavailable : bool
         ``True``: a method that cannot run here (:class:`MethodUnavailable`) is returned with
         ``unavailable`` set (a sweep's skipped row); ``False``: it raises :class:`MethodUnavailable`
@@ -368,11 +379,16 @@ def create_many(names: "list[str] | tuple[str, ...]", *, weights_dir: str | os.P
 
         if precision not in PRECISIONS:
             raise InputError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+    if read_out is not None and not any(reads_windows(e) for e in entries):
+        raise InputError(f"read_out {read_out!r}: none of {', '.join(names)} reads event windows (it applies to "
+                         f"the recurrent event networks, e.g. e2vid, firenet-sim, firenet)")
     out: dict[str, Created] = {}
     for name, e in zip(names, entries):
         extra = {"precision": precision} if precision is not None and uses_device(e) else {}
         if compiled and uses_device(e):
             extra["compiled"] = True
+        if read_out is not None and reads_windows(e):
+            extra["read_out"] = read_out
         try:
             out[name] = Created(name, create(name, weights_dir=weights_dir, device=device, **extra))
         except MethodUnavailable as exc:

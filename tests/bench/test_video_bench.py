@@ -126,3 +126,25 @@ def test_compile_runs_two_untimed_frames_first_and_changes_no_image(bench_run, t
         assert compiled[column] == eager[column]
     readme = (tmp_path / "c" / "README.md").read_text()
     assert "`python -m bench.video --precision float32 --compile`" in readme and "compiled (torch.compile;" in readme
+
+
+def test_read_out_window_reaches_the_event_networks_only_and_costs_fewer_steps(bench_run, tmp_path):
+    """``--read-out window``: firenet-sim's row takes fewer network steps per frame than with the
+    default read-out (no partial window stepped) and says so in its note; tfp beside it runs as before;
+    the regeneration command names the flag."""
+    _, cache, _ = bench_run
+    rows = {}
+    for flag in ([], ["--read-out", "window"]):
+        out = tmp_path / ("w" if flag else "k")
+        argv = ["--size", "48x32", "--duration", "0.005", "--fps", "2000", "--methods", "firenet-sim,tfp",
+                "--precision", "float32", "--cache", str(cache), "--out", str(out), "--no-progress", *flag]
+        assert vb.main(argv) == 0
+        rows[bool(flag)] = pd.read_csv(out / "results.csv").set_index("method")
+    key, window = rows[False], rows[True]
+    assert (key["status"] == "ok").all() and (window["status"] == "ok").all()
+    assert window.loc["firenet-sim", "steps_per_frame"] < key.loc["firenet-sim", "steps_per_frame"]
+    assert "read out at the last full window" in window.loc["firenet-sim", "normalisation"]
+    assert "read out" not in key.loc["firenet-sim", "normalisation"]
+    assert window.loc["tfp", "mean_psnr_db"] == key.loc["tfp", "mean_psnr_db"]
+    readme = (tmp_path / "w" / "README.md").read_text()
+    assert "--read-out window`" in readme and "frames read out at the last full event window" in readme

@@ -391,6 +391,29 @@ def test_command_precision_and_compile_reach_the_learned_method(recording, tmp_p
         assert np.array_equal(np.load(f), np.load(runs[True] / "firenet-sim" / f.name))
 
 
+def test_command_read_out_reaches_the_event_networks_and_is_refused_where_none_reads_windows(
+        recording, tmp_path, capsys):
+    """``--read-out window`` reaches firenet-sim (recorded in video.json, said in its label) and not a
+    method without event windows run beside it; asked of such methods alone it is a one-line error
+    before anything is written."""
+    folder, _ = recording
+    out = tmp_path / "window"
+    assert _run("--events", folder / "events.h5", "--method", "firenet-sim,events-integrate", "--precision",
+                "float32", "--read-out", "window", "--fps", 10_000, "--start", 0, "--end", "0.0005",
+                "--frames", "none", "--out", out, "--no-progress") == 0
+    summary = json.loads((out / "video.json").read_text())
+    assert summary["spec"]["read_out"] == "window"
+    assert summary["methods"]["firenet-sim"]["read_out"] == "window"
+    assert "read out at the last full window" in summary["methods"]["firenet-sim"]["normalisation"]
+    assert summary["methods"]["events-integrate"]["read_out"] is None
+    capsys.readouterr()
+    code = _run("--events", folder / "events.h5", "--method", "events-integrate", "--read-out", "window",
+                "--out", tmp_path / "refused", "--no-progress")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "read_out" in err[0] and "event windows" in err[0], err
+    assert not (tmp_path / "refused").exists()
+
+
 def test_command_refuses_an_unknown_precision(recording, tmp_path, capsys):
     folder, _ = recording
     code = _run("--events", folder / "events.h5", "--method", "firenet-sim", "--precision", "float16",
