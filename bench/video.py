@@ -455,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--read-out", choices=("key", "window"),
                    help="recurrent event networks: 'key' (default) steps the events after the last full window so "
                    "a frame shows its own instant; 'window' shows the last full window (at most one window "
-                   "earlier), about half the cost at 1000 frames/s")
+                   "earlier), one network step fewer per frame, at the price of frames that lag on fast motion")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
