@@ -39,7 +39,8 @@ slow methods (SNM, TFSTP, FireNet) many minutes each, so the default is the firs
 recording (50 frames per method). A method that fails becomes a row with its error, not a crash.
 
 Outputs (``--out``, default ``reports/video/bench``): ``results.csv`` (one row per method; ``device``:
-the torch device of a learned method's row, empty for the others), ``metadata.json`` (spec with the
+the torch device of a learned method's row, empty for the others; ``read_out``: a recurrent event
+network's read-out, empty for the others), ``metadata.json`` (spec with the
 device, commit, versions, machine, threads), ``README.md`` (the table) and
 ``accuracy_vs_speed.png`` (from ``results.csv`` alone; ``--plot-only`` redraws it).
 
@@ -75,7 +76,7 @@ from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
            "mean_psnr_db", "mean_ssim", "mean_flicker_rmse", "normalisation", "steps_per_frame", "threads", "device",
-           "compile_s", "error")
+           "compile_s", "read_out", "error")
 READ_ONLY = "read-only"
 SINGLE_FRAME = "tfp (single-frame calls)"
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "reports" / "video" / "bench"
@@ -192,7 +193,7 @@ def measure_method(name: str, rec: Any, times: np.ndarray, truth: Any, spec: Vid
                     mean_flicker_rmse=float(np.mean(flicks)) if flicks else None,
                     normalisation=method.last_normalisation,
                     steps_per_frame=float(np.mean(steps)) if steps else None, threads=_threads(), device=device,
-                    compile_s=compile_s, error="")
+                    compile_s=compile_s, read_out=method.params.get("read_out"), error="")
     except Exception as exc:  # a failing method is a row with its error, not a crash of the benchmark
         return _row(method=name, inputs=inputs, status="error", frames=0, fps=spec.fps, device=device,
                     error=one_line(exc))
@@ -384,7 +385,7 @@ def _note(r: dict[str, Any]) -> str:
     compile_s = r.get("compile_s")
     if compile_s is not None and not (isinstance(compile_s, float) and math.isnan(compile_s)):
         notes.append(f"compiled (torch.compile; {compile_s:.1f} s for two untimed frames first)")
-    if "read out at the last full window" in str(r.get("normalisation") or ""):
+    if r.get("read_out") == "window":
         notes.append("frames read out at the last full event window")
     return "; ".join(notes)
 

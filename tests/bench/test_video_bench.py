@@ -145,6 +145,8 @@ def test_read_out_window_reaches_the_event_networks_only_and_costs_fewer_steps(b
     assert window.loc["firenet-sim", "steps_per_frame"] < key.loc["firenet-sim", "steps_per_frame"]
     assert "read out at the last full window" in window.loc["firenet-sim", "normalisation"]
     assert "read out" not in key.loc["firenet-sim", "normalisation"]
+    assert window.loc["firenet-sim", "read_out"] == "window" and key.loc["firenet-sim", "read_out"] == "key"
+    assert pd.isna(window.loc["tfp", "read_out"])
     assert window.loc["tfp", "mean_psnr_db"] == key.loc["tfp", "mean_psnr_db"]
     readme = (tmp_path / "w" / "README.md").read_text()
     assert "--read-out window`" in readme and "frames read out at the last full event window" in readme
