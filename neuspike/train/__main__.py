@@ -20,13 +20,13 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "scale_range", "crop_trim")
+               "edge_ssim_weight", "scale_range", "crop_trim")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
-              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight", "crop_trim",
-              "size", "view", "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
+              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight", "edge_ssim_weight",
+              "crop_trim", "size", "view", "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 
@@ -131,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--support-weight", type=float, metavar="W",
                    help="single windows, support heads: add W x the error of the head's convex part (the chosen "
                         "temporal support before its correction) to the loss (default 0)")
+    d.add_argument("--edge-ssim-weight", type=float, metavar="W",
+                   help="single windows: add W x the SSIM loss over each crop's edge pixels (the top 10%% of the "
+                        "truth's gradient) to the loss (default 0)")
     d.add_argument("--crop-trim", type=int, metavar="N",
                    help="single windows: cut 0..N rows and 0..N columns (drawn per step) off each batch's crops, so "
                         "the network trains on sides that it pads as at inference (0..7; default 0)")
@@ -227,7 +230,7 @@ def spec_from_args(args: argparse.Namespace):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
-                 "view_fraction", "offset_weight", "support_weight", "crop_trim"):
+                 "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

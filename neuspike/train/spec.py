@@ -134,6 +134,12 @@ class WindowData:
         after the correction, which can undo a support wider than the motion allows; this term
         rewards a support that is right on its own: wide where the radiance holds still, narrow on
         moving edges. ``"support"`` heads only. Default 0 (off; earlier specs mean 0).
+    edge_ssim_weight : float
+        Adds edge_ssim_weight * the SSIM loss ``(1 - ssim) / 2`` averaged over each crop's edge pixels
+        only (the top 10 % of the truth's gradient magnitude, as the fast-motion report's edge scores):
+        the whole-image SSIM term weighs an edge no more than a flat pixel, and on fast pans the
+        networks lose to SNM in the SSIM's structure factor at the edges. Default 0 (off; earlier
+        specs mean 0).
     spike_only_fraction : float
         Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
         spike-only variant inside the same weights.
@@ -163,6 +169,7 @@ class WindowData:
     spike_only_fraction: float = 0.3
     offset_weight: float = 0.0
     support_weight: float = 0.0
+    edge_ssim_weight: float = 0.0
     val_view: tuple[int, int] | None = None
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
@@ -182,6 +189,10 @@ class WindowData:
                 and 0.0 <= float(self.support_weight) < math.inf):
             raise InputError(f"support_weight: expected a finite weight >= 0, got {self.support_weight!r}")
         put(self, "support_weight", float(self.support_weight))
+        if not (isinstance(self.edge_ssim_weight, (int, float)) and not isinstance(self.edge_ssim_weight, bool)
+                and 0.0 <= float(self.edge_ssim_weight) < math.inf):
+            raise InputError(f"edge_ssim_weight: expected a finite weight >= 0, got {self.edge_ssim_weight!r}")
+        put(self, "edge_ssim_weight", float(self.edge_ssim_weight))
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

@@ -239,6 +239,20 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "event_transformer.")
 
 
+#: Share of a crop's pixels that :func:`edge_mask` marks (the fast-motion report's edge share).
+EDGE_SHARE = 0.1
+
+
+def edge_mask(target: torch.Tensor, share: float = EDGE_SHARE) -> torch.Tensor:
+    """Boolean (B, 1, H, W): per crop, the pixels whose gradient magnitude (central differences inside,
+    one-sided at the border, as ``numpy.gradient``) is in the crop's top ``share`` (at least one)."""
+    gy, gx = torch.gradient(target.double(), dim=(-2, -1))
+    magnitude = torch.hypot(gx, gy).flatten(1)
+    count = max(1, int(round(share * magnitude.shape[1])))
+    threshold = magnitude.topk(count, dim=1).values[:, -1:]
+    return (magnitude >= threshold).view_as(target)
+
+
 def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     mse = ((pred - target) ** 2).mean(dim=(1, 2, 3)).clamp_min(1e-10)
     return 10.0 * torch.log10(1.0 / mse)
@@ -255,7 +269,8 @@ class WindowTask:
       the validation run.
     * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1)
       + ``offset_weight`` * the mean absolute error of each crop's mean level + ``support_weight`` *
-      the L1 error of the support head's convex part (both 0 by default).
+      the L1 error of the support head's convex part + ``edge_ssim_weight`` * the SSIM loss over each
+      crop's edge pixels (:func:`edge_mask`; all three 0 by default).
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
@@ -379,6 +394,14 @@ class WindowTask:
             support_l1 = (convex.float() - target).abs().mean()
             loss = loss + self.data.support_weight * support_l1
             parts["support_l1"] = support_l1.item()
+        if self.data.edge_ssim_weight:
+            import kornia
+
+            ssim_map = kornia.metrics.ssim(pred, target, window_size=self.data.ssim_window, max_val=1.0)
+            edges = edge_mask(target).to(ssim_map.dtype)
+            edge_ssim = ((1.0 - ssim_map) / 2 * edges).sum() / edges.sum()
+            loss = loss + self.data.edge_ssim_weight * edge_ssim
+            parts["edge_ssim_loss"] = edge_ssim.item()
         return loss, parts
 
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:

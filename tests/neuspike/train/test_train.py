@@ -295,6 +295,47 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     assert rows and all(r.split(",")[log[0].split(",").index("support_l1")] != "" for r in rows)
 
 
+def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
+    """edge_ssim_weight w adds w * mean((1 - SSIM map) / 2) over the top 10 % of the truth's gradient
+    (the fast-motion report's edge mask, pixel for pixel); with every pixel an edge it would be the
+    whole-image SSIM loss; a perfect image costs nothing; the weight is checked, old specs mean 0, and
+    the shard key is unchanged."""
+    import kornia
+
+    from neuspike.methods import create
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask, edge_mask
+    from bench.fast_motion import edge_mask as report_edges
+
+    method = create("neuspike-net-spike", precision="float32")
+    gen = torch.Generator().manual_seed(2)
+    target = torch.rand(2, 1, 32, 32, generator=gen)
+    pred = (target + 0.1 * torch.randn(2, 1, 32, 32, generator=gen)).clamp(0, 1)
+    mask = edge_mask(target)
+    for i in range(2):
+        assert np.array_equal(mask[i, 0].numpy(), report_edges(target[i, 0].numpy()))
+    assert int(mask.sum()) == 2 * round(0.1 * 32 * 32)
+    tasks = {w: WindowTask(TrainSpec(data=WindowData(edge_ssim_weight=w)), method) for w in (0.0, 2.0)}
+    base, _ = tasks[0.0].loss(pred, target)
+    with_term, parts = tasks[2.0].loss(pred, target)
+    ssim_map = kornia.metrics.ssim(pred, target, window_size=11, max_val=1.0)
+    by_hand = float(((1 - ssim_map) / 2)[mask].mean())
+    assert parts["edge_ssim_loss"] == pytest.approx(by_hand, rel=1e-5)
+    assert float(with_term - base) == pytest.approx(2.0 * by_hand, rel=1e-5)
+    # with every pixel an edge the term is the whole-image SSIM loss the trainer already has
+    every = ((1 - ssim_map) / 2).mean()
+    assert float(every) == pytest.approx(float(kornia.losses.SSIMLoss(window_size=11, max_val=1.0)(pred, target)),
+                                         rel=1e-5)
+    assert float(tasks[2.0].loss(target.clone(), target)[1]["edge_ssim_loss"]) == pytest.approx(0.0, abs=1e-6)
+    for bad in (-0.1, float("nan"), float("inf"), "1", True):
+        with pytest.raises(InputError, match="edge_ssim_weight"):
+            WindowData(edge_ssim_weight=bad)
+    assert WindowData(edge_ssim_weight=1.0).key(0) == WindowData().key(0)
+    earlier = TrainSpec(data=WindowData()).as_dict()
+    del earlier["data"]["edge_ssim_weight"]
+    assert spec_from_dict(earlier).data.edge_ssim_weight == 0.0
+
+
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
     """``val_view`` makes only the validation windows WxH (the sweeps' frame); the training windows,
     their draws and the key of a shard without it are what they were; a run validates on them."""
