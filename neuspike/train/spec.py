@@ -79,6 +79,13 @@ def _check_levels(levels: Any) -> tuple[str, ...]:
 DEFAULT_SPEED_RANGE = (100.0, 4000.0)
 
 
+def _loss_weight(name: str, value: Any) -> float:
+    """A loss term's weight: a finite number >= 0 (not a bool), as a float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= float(value) < math.inf:
+        raise InputError(f"{name}: expected a finite weight >= 0, got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True)
 class WindowData:
     """Single simulated windows (feed-forward networks), and how they are scored.
@@ -185,14 +192,8 @@ class WindowData:
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
-        if not (isinstance(self.support_weight, (int, float)) and not isinstance(self.support_weight, bool)
-                and 0.0 <= float(self.support_weight) < math.inf):
-            raise InputError(f"support_weight: expected a finite weight >= 0, got {self.support_weight!r}")
-        put(self, "support_weight", float(self.support_weight))
-        if not (isinstance(self.edge_ssim_weight, (int, float)) and not isinstance(self.edge_ssim_weight, bool)
-                and 0.0 <= float(self.edge_ssim_weight) < math.inf):
-            raise InputError(f"edge_ssim_weight: expected a finite weight >= 0, got {self.edge_ssim_weight!r}")
-        put(self, "edge_ssim_weight", float(self.edge_ssim_weight))
+        for name in ("support_weight", "edge_ssim_weight"):
+            put(self, name, _loss_weight(name, getattr(self, name)))
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

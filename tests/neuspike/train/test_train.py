@@ -253,6 +253,20 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     assert spec_from_dict(earlier).data.offset_weight == 0.0
 
 
+def _check_loss_weight_field(name: str) -> None:
+    """A loss weight of WindowData: bad values refused by name, the shard key unchanged by it, and a
+    spec file written before the field existed reads as 0."""
+    from neuspike.train.spec import spec_from_dict
+
+    for bad in (-0.1, float("nan"), float("inf"), "1", True):
+        with pytest.raises(InputError, match=name):
+            WindowData(**{name: bad})
+    assert WindowData(**{name: 0.5}).key(0) == WindowData().key(0)
+    earlier = TrainSpec(data=WindowData()).as_dict()
+    del earlier["data"][name]
+    assert getattr(spec_from_dict(earlier).data, name) == 0.0
+
+
 def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_path, one_torch_thread):
     """support_weight w adds w * L1(convex part, truth) to the loss (computed by hand here), logs it,
     keeps the shard key and old specs (0), is refused for a tanh head and for bad weights; a run with
@@ -274,13 +288,7 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     assert float(with_term - base) == pytest.approx(0.5 * by_hand, rel=1e-5)
     with pytest.raises(InputError, match="convex part"):
         tasks[0.5].loss(image, target)
-    for bad in (-0.1, float("nan"), float("inf"), "1", True):
-        with pytest.raises(InputError, match="support_weight"):
-            WindowData(support_weight=bad)
-    assert WindowData(support_weight=0.5).key(0) == WindowData().key(0)
-    earlier = TrainSpec(data=WindowData()).as_dict()
-    del earlier["data"]["support_weight"]
-    assert spec_from_dict(earlier).data.support_weight == 0.0
+    _check_loss_weight_field("support_weight")
     from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
 
     tanh = NeuSpikeNetMethod.for_training("neuspike-net", **{**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"})
@@ -327,13 +335,7 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     assert float(every) == pytest.approx(float(kornia.losses.SSIMLoss(window_size=11, max_val=1.0)(pred, target)),
                                          rel=1e-5)
     assert float(tasks[2.0].loss(target.clone(), target)[1]["edge_ssim_loss"]) == pytest.approx(0.0, abs=1e-6)
-    for bad in (-0.1, float("nan"), float("inf"), "1", True):
-        with pytest.raises(InputError, match="edge_ssim_weight"):
-            WindowData(edge_ssim_weight=bad)
-    assert WindowData(edge_ssim_weight=1.0).key(0) == WindowData().key(0)
-    earlier = TrainSpec(data=WindowData()).as_dict()
-    del earlier["data"]["edge_ssim_weight"]
-    assert spec_from_dict(earlier).data.edge_ssim_weight == 0.0
+    _check_loss_weight_field("edge_ssim_weight")
 
 
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
