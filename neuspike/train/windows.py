@@ -245,7 +245,8 @@ EDGE_SHARE = 0.1
 
 def edge_mask(target: torch.Tensor, share: float = EDGE_SHARE) -> torch.Tensor:
     """Boolean (B, 1, H, W): per crop, the pixels whose gradient magnitude (central differences inside,
-    one-sided at the border, as ``numpy.gradient``) is in the crop's top ``share`` (at least one)."""
+    one-sided at the border, as ``numpy.gradient``) is in the crop's top ``share`` (at least one): the
+    mask of ``bench.fast_motion.edge_mask``, batched in torch for the loss (the test holds them equal)."""
     gy, gx = torch.gradient(target.double(), dim=(-2, -1))
     magnitude = torch.hypot(gx, gy).flatten(1)
     count = max(1, int(round(share * magnitude.shape[1])))
