@@ -23,9 +23,9 @@ from torch import nn
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
 from neuspike.nets.fusion import FUSIONS
-from neuspike.nets.network import HEADS, MOTION_GATES, SUPPORT_CUES, TRANSFORMERS, NeuSpikeNet
+from neuspike.nets.network import HEADS, KEY_ESTIMATES, MOTION_GATES, SUPPORT_CUES, TRANSFORMERS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
-                                           spike_gain, spike_quantum, spike_representation)
+                                           key_representation, spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 from neuspike.nets.sliding import SlidingRepresentation
@@ -34,9 +34,10 @@ __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod"
 
 #: The parameters that define the module and its inputs (recorded in the weights card and checked).
 ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion", "spike_only", "head", "motion_gate",
-                       "transformer", "support_cue")
+                       "transformer", "support_cue", "key_estimates")
 #: What an architecture parameter means when a weights card (written before it existed) lacks it.
-CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none"}
+CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none",
+                 "key_estimates": "none"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
 #: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
@@ -90,6 +91,10 @@ def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError(f"support_cue: expected one of {SUPPORT_CUES}, got {p['support_cue']!r}")
     if p["support_cue"] != "none" and p["head"] != "support-count":
         raise InputError(f"support_cue: {p['support_cue']!r} needs the 'support-count' head, got {p['head']!r}")
+    if p["key_estimates"] not in KEY_ESTIMATES:
+        raise InputError(f"key_estimates: expected one of {tuple(KEY_ESTIMATES)}, got {p['key_estimates']!r}")
+    if p["key_estimates"] != "none" and p["head"] != "support-count":
+        raise InputError(f"key_estimates: {p['key_estimates']!r} needs the 'support-count' head, got {p['head']!r}")
     return p
 
 
@@ -137,6 +142,10 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``"none"`` (default; the shipped weights) or ``"spread"``: statistics of the group counts
         given to the support head (:class:`~neuspike.nets.network.SupportCue`; ``"support-count"``
         head only).
+    key_estimates : str
+        ``"none"`` (default; the shipped weights) or ``"isi-sequence"``: the interval sequence around
+        the key instant appended to the spike input and weighed by
+        :class:`~neuspike.nets.network.KeyRefine` (``"support-count"`` head only).
     level : str
         ``"counts"`` (default): the image is shifted so that its mean equals the mean radiance
         counted from the spikes (:func:`count_level`), where the sensor's gain and dark rate are
@@ -154,17 +163,18 @@ class NeuSpikeNetMethod(LearnedMethod):
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
                  motion_gate: str = "none", transformer: str = "fixed", support_cue: str = "none",
-                 level: str = "counts", **learned: Any) -> None:
+                 key_estimates: str = "none", level: str = "counts", **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
-                           transformer=transformer, support_cue=support_cue))
+                           transformer=transformer, support_cue=support_cue, key_estimates=key_estimates))
         if level not in LEVELS:
             raise InputError(f"level: expected one of {LEVELS}, got {level!r}")
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
-                         transformer=transformer, support_cue=support_cue, level=level, **learned)
+                         transformer=transformer, support_cue=support_cue, key_estimates=key_estimates,
+                         level=level, **learned)
 
     # -- LearnedMethod ----------------------------------------------------------------------------
 
@@ -174,11 +184,13 @@ class NeuSpikeNetMethod(LearnedMethod):
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
                            event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"),
                            motion_gate=p.get("motion_gate", "none"), transformer=p.get("transformer", "fixed"),
-                           support_cue=p.get("support_cue", "none"))
+                           support_cue=p.get("support_cue", "none"), key_estimates=p.get("key_estimates", "none"))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W), and with the
-        ``"support-count"`` head the spike quantum (1, 1, H, W) last.
+        ``"support-count"`` head the spike quantum (1, 1, H, W) last. With ``key_estimates`` the spikes
+        are (1, 32 + K, H, W), the key estimates after the representation (computed from the window,
+        in a video too).
 
         Raises
         ------
@@ -198,6 +210,9 @@ class NeuSpikeNetMethod(LearnedMethod):
         else:
             x_t = spike_representation(sample, p["spike_representation"])
             x_m = None if p["spike_only"] else event_representation(sample, p["event_representation"])
+        key = key_representation(sample, p.get("key_estimates", "none"))
+        if key is not None:
+            x_t = np.concatenate([x_t, key])
         inputs = [torch.from_numpy(x_t)[None]]
         if not p["spike_only"]:
             inputs.append(torch.from_numpy(x_m)[None])

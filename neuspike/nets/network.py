@@ -76,6 +76,22 @@ Support cue (``support_cue``; the ``"support-count"`` head only):
   at zero, so weights trained without it load and compute exactly what they computed
   (``STARTS_AS_IDENTITY``).
 
+Key estimates (``key_estimates``; the ``"support-count"`` head only):
+
+* ``"none"`` (default): the head weighs the 32 channels, whose finest estimates are 16-plane group
+  rates and one interval at each group's centre. On a fast pan an edge crosses about 11 pixels within
+  one group at 16x the sweeps' speed, and none of the estimates is taken at the key instant itself.
+* ``"isi-sequence"``: the spike input carries 5 more channels after the 32, the radiance estimates
+  ``1 / (ISI * gain)`` of the inter-spike interval that holds the key instant and of the two before
+  and the two after it (:func:`neuspike.nets.representations.key_intervals`); the encoders, the
+  input-level skip, the support softmax and the cues see the 32 channels only. A small module
+  (:class:`KeyRefine`) reads the decoder's last features and the estimates, counted in spikes and
+  standardised against the support (``z_k = (n_k - n) / sqrt(n + 1)``, ``n = convex / q``, and
+  ``log1p(n_k)``), and gives per-pixel weights ``a_k``: the image is ``convex + sum_k a_k (e_k -
+  convex) + correction``. Its last layer starts at zero, so weights trained without it load and
+  compute exactly what they computed (``STARTS_AS_IDENTITY``), and ``a_k`` moves the estimate
+  towards the key instant where the image calls for it (up to replacing it, ``a_k = 1``).
+
 The spike-only variant (``spike_only=True``) has the texture path and the decoders: no motion
 path and no fusion modules, r^0 = x_t^3, skips x_t^2, x_t^1, x_t^0. Every fusion candidate reduces
 to ``F(t, 0) = t``, so the spike-only network is exactly the full one with the motion path silent,
@@ -93,7 +109,7 @@ from neuspike.nets.fusion import make_fusion
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
 __all__ = ["HEADS", "InputTransformer", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
-           "SUPPORT_CUES", "SupportCue", "TRANSFORMERS", "pad_to_multiple"]
+           "KEY_ESTIMATES", "KeyRefine", "SUPPORT_CUES", "SupportCue", "TRANSFORMERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
 PAPER_PARAMETERS = 5_985_000
@@ -108,6 +124,8 @@ MOTION_GATES = ("none", "stats")
 TRANSFORMERS = ("fixed", "learned")
 #: The support head's cues (module docstring).
 SUPPORT_CUES = ("none", "spread")
+#: Extra spike estimates at the key instant and the channels each adds to the spike input (module docstring).
+KEY_ESTIMATES = {"none": 0, "isi-sequence": 5}
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:
@@ -227,6 +245,34 @@ class SupportCue(nn.Module):
         return self.out(torch.relu(self.mix(cue)))
 
 
+class KeyRefine(nn.Module):
+    """The ``"isi-sequence"`` refinement (module docstring): (features (B, 32, H, W), estimates (B, K, H, W),
+    convex (B, 1, H, W), quantum (B, 1, H|1, W|1)) -> ``sum_k a_k (e_k - convex)`` (B, 1, H, W); zero at
+    construction."""
+
+    HIDDEN = 16
+
+    def __init__(self, features: int, estimates: int) -> None:
+        super().__init__()
+        self.mix = nn.Conv2d(features + 2 * estimates, self.HIDDEN, 3, padding=1)
+        self.out = nn.Conv2d(self.HIDDEN, estimates, 1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    @staticmethod
+    def statistics(estimates: torch.Tensor, convex: torch.Tensor, quantum: torch.Tensor) -> torch.Tensor:
+        """``z_k = (n_k - n) / sqrt(n + 1)`` and ``log1p(n_k)``, counts in the quantum's unit: (B, 2K, H, W)."""
+        q = quantum.float()
+        n_k, n = estimates.float() / q, (convex.float() / q).clamp(min=0.0)
+        return torch.cat([(n_k - n) / torch.sqrt(n + 1.0), torch.log1p(n_k)], dim=1)
+
+    def forward(self, features: torch.Tensor, estimates: torch.Tensor, convex: torch.Tensor,
+                quantum: torch.Tensor) -> torch.Tensor:
+        stats = self.statistics(estimates, convex, quantum).to(self.mix.weight.dtype)
+        a = self.out(torch.relu(self.mix(torch.cat([features.to(stats.dtype), stats], dim=1))))
+        return (a.float() * (estimates.float() - convex)).sum(dim=1, keepdim=True)
+
+
 class NeuSpikeNet(nn.Module):
     """NeuSpike-Net (module docstring).
 
@@ -252,15 +298,23 @@ class NeuSpikeNet(nn.Module):
         ``"none"`` or ``"spread"`` (:data:`SUPPORT_CUES`, module docstring): statistics of the group
         counts that tell the support head where the radiance changes within the window
         (``"support-count"`` head only).
+    key_estimates : str
+        ``"none"`` or ``"isi-sequence"`` (:data:`KEY_ESTIMATES`, module docstring): the spike input's
+        extra channels at the key instant and the module that weighs them (``"support-count"`` head only).
     """
 
     #: Parts that compute the identity as constructed: weights trained without them start the same network.
-    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.", "support_cue.")
+    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.", "support_cue.", "key_refine.")
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
                  event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none",
-                 transformer: str = "fixed", support_cue: str = "none") -> None:
+                 transformer: str = "fixed", support_cue: str = "none", key_estimates: str = "none") -> None:
         super().__init__()
+        if key_estimates not in KEY_ESTIMATES:
+            raise InputError(f"NeuSpikeNet: key_estimates must be one of {tuple(KEY_ESTIMATES)}, got {key_estimates!r}")
+        if key_estimates != "none" and head != "support-count":
+            raise InputError(f"NeuSpikeNet: key_estimates {key_estimates!r} counts spikes with the quantum, which "
+                             f"only the 'support-count' head takes (head {head!r})")
         if support_cue not in SUPPORT_CUES:
             raise InputError(f"NeuSpikeNet: support_cue must be one of {SUPPORT_CUES}, got {support_cue!r}")
         if support_cue != "none" and head != "support-count":
@@ -275,6 +329,7 @@ class NeuSpikeNet(nn.Module):
         if spike_only and motion_gate != "none":
             raise InputError("NeuSpikeNet: the spike-only network has no motion path to gate (motion_gate='none')")
         self.in_channels = in_channels
+        self.key_channels = KEY_ESTIMATES[key_estimates]
         self.spike_only = spike_only
         self.head = head
         self.event_skip_weight = float(event_skip_weight)
@@ -300,6 +355,8 @@ class NeuSpikeNet(nn.Module):
             nn.init.zeros_(self.predict.bias)
         if support_cue == "spread":
             self.support_cue = SupportCue(outputs)
+        if self.key_channels:
+            self.key_refine = KeyRefine(DECODER_CHANNELS[2], self.key_channels)
 
     @property
     def takes_quantum(self) -> bool:
@@ -310,12 +367,13 @@ class NeuSpikeNet(nn.Module):
                 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         """(spikes[, events][, quantum]) -> image (B, 1, H, W) (in [0, 1] for the ``"tanh"`` head).
 
-        spikes and events are (B, 32, H, W); ``events`` must be given to the full network and
+        spikes and events are (B, 32, H, W) (spikes (B, 32 + K, H, W) with ``key_estimates``, the K key
+        estimates last); ``events`` must be given to the full network and
         omitted for the spike-only one; ``quantum`` (the radiance of one spike in a 16-plane group,
         (B, 1, H, W) or (B, 1, 1, 1)) comes last, for the ``"support-count"`` head only.
         ``parts=True`` (the ``"support"`` heads only) returns ``(image, convex)``, ``convex`` the
         head's convex combination of the spike estimates before the correction is added
-        (``image = convex + correction``), so a loss can score the chosen temporal support itself.
+        (``image = convex + correction``, plus the key refinement with ``key_estimates``), so a loss can score the chosen temporal support itself.
         """
         rest = list(rest)
         quantum = rest.pop() if self.takes_quantum and rest and (self.spike_only or len(rest) == 2) else None
@@ -324,6 +382,7 @@ class NeuSpikeNet(nn.Module):
             raise InputError(f"NeuSpikeNet: {len(rest) + 1 + (quantum is not None)} inputs given, expected at most "
                              f"{1 + (not self.spike_only) + self.takes_quantum}")
         self._check_inputs(spikes, quantum, parts)
+        spikes, key = self._split(spikes)
         if self.spike_only and events is not None:
             raise InputError("NeuSpikeNet: the spike-only network takes no events")
         if not self.spike_only:
@@ -334,13 +393,13 @@ class NeuSpikeNet(nn.Module):
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
         if self.spike_only:
-            return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts)
+            return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts, key)
         m = self.motion(pad_to_multiple(self._transform("event_transformer", events)))
         if hasattr(self, "motion_gate"):
             g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
             m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
-                            t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w), parts)
+                            t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w), parts, key)
 
     def forward_texture_only(self, spikes: torch.Tensor, quantum: torch.Tensor | None = None, *,
                              parts: bool = False) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
@@ -350,9 +409,16 @@ class NeuSpikeNet(nn.Module):
         same texture-path, residual and decoder weights. ``parts`` as in :meth:`forward`.
         """
         self._check_inputs(spikes, quantum, parts)
+        spikes, key = self._split(spikes)
         h, w = spikes.shape[-2:]
         t = self.texture(pad_to_multiple(self._transform("spike_transformer", spikes)))
-        return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts)
+        return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts, key)
+
+    def _split(self, spikes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The 32 representation channels and the key estimates after them (None without them)."""
+        if not self.key_channels:
+            return spikes, None
+        return spikes[:, : self.in_channels], spikes[:, self.in_channels:]
 
     def _transform(self, name: str, x: torch.Tensor) -> torch.Tensor:
         """The learned input transformer ``name`` applied to ``x``, or ``x`` (``"fixed"``)."""
@@ -362,8 +428,10 @@ class NeuSpikeNet(nn.Module):
     def _check_inputs(self, spikes: torch.Tensor, quantum: torch.Tensor | None, parts: bool = False) -> None:
         if parts and self.head == "tanh":
             raise InputError("NeuSpikeNet: parts=True needs a 'support' head; the 'tanh' head has no convex part")
-        if spikes.ndim != 4 or spikes.shape[1] != self.in_channels:
-            raise InputError(f"NeuSpikeNet: spikes must be (B, {self.in_channels}, H, W), got {tuple(spikes.shape)}")
+        channels = self.in_channels + self.key_channels
+        if spikes.ndim != 4 or spikes.shape[1] != channels:
+            extra = f" ({self.in_channels} + {self.key_channels} key estimates)" if self.key_channels else ""
+            raise InputError(f"NeuSpikeNet: spikes must be (B, {channels}, H, W){extra}, got {tuple(spikes.shape)}")
         if self.takes_quantum:
             if quantum is None:
                 raise InputError("NeuSpikeNet: the support-count head needs the spike quantum as its last input")
@@ -375,8 +443,8 @@ class NeuSpikeNet(nn.Module):
             raise InputError(f"NeuSpikeNet: the {self.head!r} head takes no quantum")
 
     def _decode(self, r: torch.Tensor, s2: torch.Tensor, s1: torch.Tensor, s0: torch.Tensor,
-                spikes: torch.Tensor, quantum: torch.Tensor | None, size: tuple[int, int], parts: bool = False
-                ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
+                spikes: torch.Tensor, quantum: torch.Tensor | None, size: tuple[int, int], parts: bool = False,
+                key: torch.Tensor | None = None) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
         h, w = size
         d = self.up1(self.residual(r))
         d = self.up2(torch.cat([d, s2], dim=1))
@@ -391,4 +459,7 @@ class NeuSpikeNet(nn.Module):
         correction = y[:, :1].float()
         if quantum is not None:
             correction = correction * quantum.float()
-        return (support + correction, support) if parts else support + correction
+        image = support + correction
+        if key is not None:
+            image = image + self.key_refine(d[..., :h, :w], key[..., :h, :w], support, quantum)
+        return (image, support) if parts else image

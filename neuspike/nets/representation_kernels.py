@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = ["advance_events", "advance_spikes", "assemble_events", "assemble_spikes", "contrast_window",
-           "counts_to_contrast", "spike_window"]
+           "counts_to_contrast", "key_window", "spike_window"]
 
 _JIT = dict(cache=True, nogil=True, error_model="numpy")
 
@@ -80,6 +80,58 @@ def spike_window(u8, edges, centres, gain, band_rows, out):
                     for x in range(w):
                         out[n_groups + ci, r, x] = (np.float32(1.0) / np.float32(nxt[x] - prevs[ci, x])) / gain
                     ci -= 1
+
+
+@njit(parallel=True, **_JIT)
+def key_window(u8, centre, side, gain, out):
+    """The interval sequence around plane ``centre`` divided by ``gain`` into ``out`` (2 side + 1, H, W)
+    float32 (:func:`neuspike.nets.representations.key_intervals`, bit for bit).
+
+    Per row, the planes are read outwards from the centre, row by row, until every pixel of the row
+    has its ``side + 1`` nearest spikes on that side (or the window ends).
+    """
+    t_len, h, w = u8.shape
+    need = side + 1
+    for r in prange(h):
+        before = np.full((need, w), -t_len, np.int32)
+        after = np.full((need, w), 2 * t_len, np.int32)
+        n_b = np.zeros(w, np.int32)
+        n_a = np.zeros(w, np.int32)
+        left = w
+        for t in range(centre - 1, -1, -1):
+            row = u8[t, r]
+            for x in range(w):
+                if row[x] != 0 and n_b[x] < need:
+                    before[n_b[x], x] = t
+                    n_b[x] += 1
+                    if n_b[x] == need:
+                        left -= 1
+            if left == 0:
+                break
+        left = w
+        for t in range(centre, t_len):
+            row = u8[t, r]
+            for x in range(w):
+                if row[x] != 0 and n_a[x] < need:
+                    after[n_a[x], x] = t
+                    n_a[x] += 1
+                    if n_a[x] == need:
+                        left -= 1
+            if left == 0:
+                break
+        for x in range(w):
+            mid = np.float32(1.0) / np.float32(after[0, x] - before[0, x])
+            out[side, r, x] = mid / gain
+            prev = mid
+            for k in range(1, side + 1):
+                if n_b[x] >= k:
+                    prev = np.float32(1.0) / np.float32(before[k - 1, x] - before[k, x])
+                out[side - k, r, x] = prev / gain
+            prev = mid
+            for k in range(1, side + 1):
+                if n_a[x] >= k:
+                    prev = np.float32(1.0) / np.float32(after[k, x] - after[k - 1, x])
+                out[side + k, r, x] = prev / gain
 
 
 @njit(**_JIT)

@@ -43,8 +43,9 @@ try:  # numba is a dependency, but the representations must still work where it 
 except ImportError:  # pragma: no cover - exercised only without numba
     _kernels = None
 
-__all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "SPIKE_REPRESENTATIONS", "event_representation",
-           "spike_gain", "spike_quantum", "spike_representation"]
+__all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "KEY_ESTIMATES", "KEY_SIDE", "SPIKE_REPRESENTATIONS",
+           "event_representation", "key_intervals", "key_representation", "spike_gain", "spike_quantum",
+           "spike_representation"]
 
 #: Channels of either representation (the supplement's 32).
 CHANNELS = 32
@@ -56,6 +57,10 @@ NOMINAL_EVENT_THRESHOLD = 0.2
 BACKENDS = ("auto", "numba", "numpy")
 #: Rows per parallel band of the spike kernel.
 BAND_ROWS = 8
+#: Extra spike estimates at the key instant (:func:`key_representation`): none, or the interval sequence.
+KEY_ESTIMATES = ("none", "isi-sequence")
+#: Intervals on each side of the one that holds the key instant (``2 * KEY_SIDE + 1`` channels).
+KEY_SIDE = 2
 
 
 def _kernels_usable(backend: str = "auto") -> bool:
@@ -199,6 +204,67 @@ def spike_representation(sample: Sample, kind: str, *, backend: str = "auto") ->
         centres = (edges[:-1] + edges[1:]) // 2
         return np.concatenate([rates, interval_rate(planes, centres)]) / np.float32(gain)
     raise InputError(f"spike representation: expected one of {SPIKE_REPRESENTATIONS}, got {kind!r}")
+
+
+def key_intervals(planes: np.ndarray, centre: int, side: int = KEY_SIDE) -> np.ndarray:
+    """``1 / ISI`` of the ``2 * side + 1`` inter-spike intervals around plane index ``centre``:
+    float32 (2 * side + 1, H, W), spikes per plane, earliest interval first.
+
+    With ``p_1 > p_2 > ...`` the pixel's spike planes before ``centre`` (``< centre``) and ``n_1 < n_2 <
+    ...`` those at or after it, interval 0 (channel ``side``) is ``n_1 - p_1``, the one that holds the
+    key instant (:func:`interval_rate` at ``centre``, exactly); interval ``-k`` is ``p_k - p_(k+1)`` and
+    ``+k`` is ``n_(k+1) - n_k``. The first missing spike on a side counts as one a window length (T)
+    outside the window (``-T`` or ``2T``), as in :func:`interval_rate`; an interval beyond that one
+    repeats its neighbour nearer the key instant, so every channel is a radiance estimate.
+    """
+    t, h, w = planes.shape
+    if not 0 < centre < t:
+        raise InputError(f"key intervals: the centre {centre} is not inside the {t}-plane window")
+    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+
+    def nth(stack: np.ndarray, first: int, step: int, virtual: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """The planes of the 1st .. (side + 1)-th spike of ``stack`` (ordered away from the centre)."""
+        cs = np.cumsum(stack, axis=0, dtype=np.int16)
+        total = cs[-1]
+        where, have = [], []
+        for j in range(1, side + 2):
+            found = total >= j
+            at = np.argmax(cs >= j, axis=0)
+            where.append(np.where(found, first + step * at, virtual).astype(np.int32))
+            have.append(found)
+        return where, have
+
+    before, have_b = nth(u8[:centre][::-1], centre - 1, -1, -t)
+    after, have_a = nth(u8[centre:], centre, 1, 2 * t)
+    out = np.empty((2 * side + 1, h, w), np.float32)
+    out[side] = 1.0 / (after[0] - before[0]).astype(np.float32)
+    for k in range(1, side + 1):  # p_k - p_(k+1); where p_k is already the virtual spike, the nearer interval
+        with np.errstate(divide="ignore"):  # two virtual spikes: replaced by the neighbour below
+            b = 1.0 / (before[k - 1] - before[k]).astype(np.float32)
+            a = 1.0 / (after[k] - after[k - 1]).astype(np.float32)
+        out[side - k] = np.where(have_b[k - 1], b, out[side - k + 1])
+        out[side + k] = np.where(have_a[k - 1], a, out[side + k - 1])
+    return out
+
+
+def key_representation(sample: Sample, kind: str, *, backend: str = "auto") -> np.ndarray | None:
+    """The extra spike estimates at the key instant: float32 (2 * KEY_SIDE + 1, H, W) in radiance units
+    for ``"isi-sequence"`` (:func:`key_intervals` at the window's centre, divided by the gain), None for
+    ``"none"``."""
+    if kind == "none":
+        return None
+    if kind != "isi-sequence":
+        raise InputError(f"key estimates: expected one of {KEY_ESTIMATES}, got {kind!r}")
+    planes = _planes(sample)
+    gain, _ = spike_gain(sample)
+    centre = planes.shape[0] // 2
+    if _kernels_usable(backend):
+        u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+        out = np.empty((2 * KEY_SIDE + 1, *planes.shape[1:]), np.float32)
+        with KERNEL_LOCK:
+            _kernels.key_window(np.ascontiguousarray(u8), centre, KEY_SIDE, np.float32(gain), out)
+        return out
+    return key_intervals(planes, centre) / np.float32(gain)
 
 
 def event_representation(sample: Sample, kind: str, *, event_threshold: float | None = None,

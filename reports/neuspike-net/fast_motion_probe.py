@@ -59,12 +59,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--weights", default="../shared/weights", help="weights folder (the shipped ones are found anyway)")
     p.add_argument("--weights-file", help="a candidate's fusion weights (.safetensors) instead of the shipped ones")
     p.add_argument("--support-cue", default="none", choices=("none", "spread"), help="the candidate's support cue")
+    p.add_argument("--key-estimates", default="none", choices=("none", "isi-sequence"), help="the candidate's key estimates")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     folder, extra = args.weights, {}
     if args.weights_file:
         folder, extra = str(Path(args.weights_file).parent), {"weights_file": Path(args.weights_file).name}
-    method = create("neuspike-net", weights_dir=folder, precision="float32", support_cue=args.support_cue, **extra)
+    method = create("neuspike-net", weights_dir=folder, precision="float32", support_cue=args.support_cue,
+                    key_estimates=args.key_estimates, **extra)
     net = method.module.float().eval()
     logits: dict[str, torch.Tensor] = {}
     net.predict.register_forward_hook(lambda _m, _i, out: logits.__setitem__("y", out))

@@ -60,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--speeds", default="8,16", help="multiples of the sweeps' pan speed (comma-separated)")
     p.add_argument("--light", type=float, default=0.25, help="light scale L (default 0.25)")
     p.add_argument("--weights", default="../shared/weights", help="weights folder (the shipped ones are found anyway)")
+    p.add_argument("--key-estimates", default="none", choices=("none", "isi-sequence"),
+                   help="the candidate's key estimates (NeuSpike-Net's key_estimates)")
     args = p.parse_args(argv)
     from neuspike.scenes.photos import TEST_PHOTOS
     from neuspike.utils.parallel import set_threads
@@ -68,8 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     if set(photos) & set(TEST_PHOTOS):
         p.error(f"--photos: {sorted(set(photos) & set(TEST_PHOTOS))} are test photographs; choose training ones")
     set_threads(1)
-    methods = {name: create(name, weights_dir=args.weights, **({"precision": "float32"} if name != "snm" else {}))
-               for name in METHODS}
+    learned = {"precision": "float32", "key_estimates": args.key_estimates}
+    methods = {name: create(name, weights_dir=args.weights, **(learned if name != "snm" else {})) for name in METHODS}
     print("cell | method | SSIM (suite) | product of the factors | luminance | contrast | structure | edge std ratio")
     for photo in photos:
         for speed in (int(v) for v in args.speeds.split(",")):
