@@ -243,3 +243,67 @@ def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
     assert torch.all(inputs[-1] == torch.tensor(q, dtype=torch.float32))
     support = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support"})
     assert len(support.encode(sample)[0]) == 2  # the support head takes none
+
+
+def brute_force_key_intervals(planes, centre, side=2):
+    """The interval sequence around ``centre`` pixel by pixel, from the list of spike planes."""
+    t = planes.shape[0]
+    out = np.zeros((2 * side + 1, *planes.shape[1:]), np.float32)
+    for y, x in np.ndindex(*planes.shape[1:]):
+        spikes = np.flatnonzero(planes[:, y, x])
+        before, after = list(spikes[spikes < centre][::-1]), list(spikes[spikes >= centre])
+        b, a = before + [-t], after + [2 * t]  # the first missing spike: a window length outside
+        seq = {0: 1.0 / (a[0] - b[0])}
+        for k in range(1, side + 1):
+            seq[-k] = 1.0 / (b[k - 1] - b[k]) if len(before) >= k else seq[-k + 1]
+            seq[k] = 1.0 / (a[k] - a[k - 1]) if len(after) >= k else seq[k - 1]
+        out[:, y, x] = [seq[k] for k in range(-side, side + 1)]
+    return out
+
+
+@pytest.mark.parametrize("p", [0.0, 0.004, 0.05, 0.5])
+def test_key_intervals_match_a_brute_force_search_and_the_interval_at_the_centre(p, rng):
+    """Both the NumPy reference and the compiled kernel: the intervals pixel by pixel, the middle one
+    :func:`interval_rate` at the centre, and the kernel equal to the reference bit for bit."""
+    from neuspike.nets.representations import key_intervals
+
+    planes = rng.random((256, 6, 9)) < p
+    planes[:, 0, 0] = False  # a silent pixel, and one with a single spike before the centre
+    planes[:, 0, 1] = False
+    planes[40, 0, 1] = True
+    ref = key_intervals(planes, 128)
+    assert np.allclose(ref, brute_force_key_intervals(planes, 128))
+    assert np.array_equal(ref[2], interval_rate(planes, [128])[0])
+    assert np.allclose(ref[:, 0, 0], 1 / (3 * 256)) and np.allclose(ref[:2, 0, 1], 1 / (40 + 256))
+    try:
+        from neuspike.nets import representation_kernels as kernels
+    except ImportError:  # pragma: no cover - numba missing
+        return
+    out = np.empty_like(ref)
+    kernels.key_window(planes.view(np.uint8), 128, 2, np.float32(0.3), out)
+    assert np.array_equal(out, ref / np.float32(0.3))
+
+
+def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_input():
+    """Every interval of a regular train is its period: the five channels are (1 / period) / gain,
+    appended after the 32 by ``encode``; bad names are refused, and cards without the field mean none."""
+    from neuspike.nets.representations import key_representation
+
+    sample = make_sample(gain=0.5, period=4)
+    assert key_representation(sample, "none") is None
+    key = key_representation(sample, "isi-sequence")
+    assert key.shape == (5, H, W) and np.allclose(key, 0.25 / 0.5)
+    assert np.array_equal(key_representation(sample, "isi-sequence", backend="numpy"), key)
+    design = {**DEFAULT_DESIGN, "spike_only": False, "head": "support-count", "motion_gate": "stats"}
+    method = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi-sequence"})
+    spikes = method.encode(sample)[0][0]
+    assert spikes.shape == (1, 37, H, W)
+    assert torch.equal(spikes[0, :32], torch.from_numpy(spike_representation(sample, "counts_interval")))
+    assert torch.equal(spikes[0, 32:], torch.from_numpy(key))
+    with pytest.raises(InputError, match="key_estimates"):
+        NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi"})
+    with pytest.raises(InputError, match="support-count"):
+        NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support", "key_estimates": "isi-sequence"})
+    assert create("neuspike-net").params["key_estimates"] == "none"
+    with pytest.raises(FormatError, match="key_estimates"):  # the shipped card predates the field
+        create("neuspike-net", key_estimates="isi-sequence")

@@ -357,3 +357,42 @@ def test_gate_box_mean_is_the_3x3_mean_inside_the_image(hw):
     x = torch.randn(2, 3, *hw, generator=torch.Generator().manual_seed(0))
     expect = torch.nn.functional.avg_pool2d(x, 3, stride=1, padding=1, count_include_pad=False)
     assert torch.allclose(MotionGate.box3(x), expect, atol=1e-6)
+
+
+def test_key_refinement_starts_as_the_network_without_it_and_can_replace_the_support(one_torch_thread):
+    """``key_estimates="isi-sequence"`` adds conv3x3(32 + 10 -> 16) + conv1x1(16 -> 5) (6,149 parameters)
+    whose last layer is zero: weights trained without it load and give the same images from the same
+    32 channels, for the fusion network and its spike-only variant; the encoders never see the five
+    extra channels. With ``a_k = 1`` for one estimate the image is that estimate plus the correction."""
+    from neuspike.methods.weights import load_state_strict
+    from neuspike.nets.network import KeyRefine
+
+    torch.manual_seed(9)
+    count = lambda net: sum(p.numel() for p in net.parameters())  # noqa: E731
+    for spike_only, gate in ((False, "stats"), (True, "none")):
+        plain = NeuSpikeNet(head="support-count", motion_gate=gate, spike_only=spike_only).eval()
+        keyed = NeuSpikeNet(head="support-count", motion_gate=gate, spike_only=spike_only,
+                            key_estimates="isi-sequence").eval()
+        assert count(keyed) - count(plain) == conv(32 + 10, 16) + conv(16, 5, k=1) == 6149
+        with torch.no_grad():
+            plain.predict.weight.normal_(0, 0.05)
+        load_state_strict(keyed, plain.state_dict(), "plain", may_lack=keyed.STARTS_AS_IDENTITY)
+        x, key, q = torch.rand(2, 32, 20, 36), torch.rand(2, 5, 20, 36), torch.full((2, 1, 1, 1), 0.02)
+        events = () if spike_only else (torch.randn(2, 32, 20, 36),)
+        with torch.no_grad():
+            base, convex = plain(x, *events, q, parts=True)
+            assert torch.equal(keyed(torch.cat([x, key], 1), *events, q), base)
+            keyed.key_refine.out.bias[2] = 1.0  # a_0 = 1: the interval at the key instant replaces the support
+            image, same_convex = keyed(torch.cat([x, key], 1), *events, q, parts=True)
+            assert torch.equal(same_convex, convex)
+            assert torch.allclose(image, key[:, 2:3] + (base - convex), atol=1e-6)
+            with pytest.raises(InputError, match="37"):
+                keyed(x, *events, q)
+    stats = KeyRefine.statistics(torch.full((1, 5, 2, 2), 9 * 0.02), torch.full((1, 1, 2, 2), 4 * 0.02),
+                                 torch.full((1, 1, 1, 1), 0.02))
+    assert torch.allclose(stats[:, :5], torch.full((1, 5, 2, 2), (9 - 4) / 5 ** 0.5))  # counts 9 against 4
+    assert torch.allclose(stats[:, 5:], torch.full((1, 5, 2, 2), float(torch.log1p(torch.tensor(9.0)))))
+    with pytest.raises(InputError, match="key_estimates"):
+        NeuSpikeNet(head="support", key_estimates="isi-sequence")
+    with pytest.raises(InputError, match="key_estimates"):
+        NeuSpikeNet(head="support-count", key_estimates="isi")

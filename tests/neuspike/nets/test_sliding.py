@@ -130,3 +130,28 @@ def test_a_window_shifted_at_the_recording_end_is_refused(folder, one_torch_thre
         method.reconstruct(inside)
         with pytest.raises(InputError, match="refused"):
             method.reconstruct(outside)
+
+
+def test_streamed_images_with_key_estimates_equal_single_frame_ones(folder, one_torch_thread):
+    """The key estimates are computed from each frame's window in a video too: a network whose
+    refinement is not zero streams the images it gives frame by frame."""
+    import torch
+
+    from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
+
+    design = {**DEFAULT_DESIGN, "spike_only": True, "head": "support-count", "key_estimates": "isi-sequence"}
+    methods = [NeuSpikeNetMethod.for_training("neuspike-net-spike", **design) for _ in range(2)]
+    torch.manual_seed(3)
+    with torch.no_grad():
+        methods[0].module.key_refine.out.weight.normal_(0, 0.2)
+        methods[0].module.key_refine.out.bias.fill_(0.3)
+    methods[1].module.load_state_dict(methods[0].module.state_dict())
+    for m in methods:
+        m.module.eval()
+    with _open(folder) as rec:
+        lo, _ = centred_span(rec)
+        times = frame_times(lo, lo + 0.003, 1000.0)
+        streamed = list(reconstruct_video(methods[0], rec, times))
+        for sample, (_, image) in zip(stream_samples(rec, times), streamed):
+            np.testing.assert_array_equal(image, methods[1].reconstruct(sample))
+    assert methods[0]._sliding.last_mode == "sliding"
