@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                 truth, (h, w) = sample.ground_truth, sample.ground_truth.shape
                 inputs = method.encode(sample)[0]
                 with torch.inference_mode():
-                    gains = net.motion_gate(inputs[0], inputs[1])[0].numpy()
+                    gains = net.motion_gate(inputs[0][:, :net.in_channels], inputs[1])[0].numpy()
                     image = net(*inputs)[0, 0].numpy()
                     softmax = torch.softmax(logits["y"][0, 1:, :h, :w].float(), dim=0).numpy()
                     forced = {}

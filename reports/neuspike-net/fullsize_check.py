@@ -53,12 +53,17 @@ SWEEP_POINTS = ([("light", f"L = 1/{round(1 / l)}", l, 128, "none") for l in (1 
                 + [("noise", f"noise {n}", 1 / 4, 128, n) for n in ("small", "medium", "high")])
 
 
+#: The parameters a candidate's card may set beyond the registry's defaults.
+DESIGN_PARAMS = ("head", "motion_gate", "transformer", "support_cue", "key_estimates")
+
+
 def trained_design(folder: str | None, method: str) -> dict[str, str]:
-    """The head and motion gate that ``folder``'s weights of ``method`` were trained with (their card;
-    empty for the shipped weights), so that any candidate loads."""
+    """The design parameters (head, motion gate, input transformer, support cue, key estimates) that
+    ``folder``'s weights of ``method`` were trained with (their card; empty for the shipped weights), so
+    that any candidate loads."""
     card = read_card(f"{folder}/{method}.safetensors") if folder else None
     trained = (card or {}).get("model", {}).get("params", {})
-    return {k: trained[k] for k in ("head", "motion_gate") if k in trained}
+    return {k: trained[k] for k in DESIGN_PARAMS if k in trained}
 
 
 def probe_start(doc: str, argv: list[str] | None):
@@ -105,9 +110,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="which variant's weights file each folder is read for (default neuspike-net)")
     p.add_argument("--level", choices=("counts", "network"), default="counts",
                    help="how the image's mean level is set (the method's `level`; default counts)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     args = p.parse_args(argv)
     folders = args.folders or [None]
-    torch.set_num_threads(2)
+    torch.set_num_threads(args.threads)
     samples, keys = [], []
     if args.grid == "quick":
         cells = [(f"{kind}:{photo}", (light, noise), light, 128, noise)
