@@ -19,7 +19,9 @@ Outputs in ``--out``, beside the sweep's (results.csv, config.json, metadata.jso
                      length); over the whole image (``support_planes``, ``bin00`` ...), where flat
                      regions that motion does not blur dominate, and over the output's edge pixels
                      only (``edge_support_planes``, ``edge_bin00`` ...: the pixels whose ground-truth
-                     gradient magnitude is in its top :data:`EDGE_FRACTION`, all of which move in a pan)
+                     gradient magnitude is in its top :data:`EDGE_FRACTION`, all of which move in a pan);
+                     a network with key estimates (the interval sequence at the key instant) has their
+                     share in ``key_share`` / ``edge_key_share``, counted half in each of bins 7 and 8
 
 Options, resuming and exit status are those of :mod:`bench.sweep` (whose ``--lights``, ``--motions``,
 ``--scenes`` and ``--size`` override this test's defaults).
@@ -178,14 +180,20 @@ def edge_mask(truth, fraction: float = EDGE_FRACTION):
 
 def _bin_shares(inputs, objective):
     """The 16 bins' shares of |input x gradient| of the scalar ``objective`` for the spike input
-    ``inputs[0]`` (its rate and interval channels of a bin together); the graph is kept for another call."""
+    ``inputs[0]`` (its rate and interval channels of a bin together), and the share of the key estimates
+    (``key_estimates``; 0 without them), which is also split between the two bins that meet at the key
+    instant (the intervals nearest to it; at low light the outer ones reach further); the graph is kept
+    for another call."""
     import numpy as np
     import torch
 
     grad = torch.autograd.grad(objective, inputs[0], retain_graph=True)[0]
     share = (grad * inputs[0]).abs().sum(dim=(0, 2, 3)).detach().numpy().astype(np.float64)
     share = share / max(share.sum(), 1e-30)
-    return share[:16] + (share[16:32] if share.size >= 32 else 0.0)
+    bins = share[:16] + (share[16:32] if share.size >= 32 else 0.0)
+    key = float(share[32:].sum())  # the interval sequence at the key instant, on the boundary of bins 7 and 8
+    bins[7:9] += key / 2
+    return bins, key
 
 
 def temporal_support(out: Path, spec, *, weights: str | None = None, threads: int = 1) -> Path | None:
@@ -217,14 +225,15 @@ def temporal_support(out: Path, spec, *, weights: str | None = None, threads: in
         for name, method in methods.items():
             inputs = [x.clone().requires_grad_(True) for x in method.encode(sample)[0]]
             y = method.module(*inputs)[0, 0, : edges.shape[0], : edges.shape[1]]
-            bins = _bin_shares(inputs, y.sum())
-            edge_bins = _bin_shares(inputs, y[edges].sum())
+            bins, key = _bin_shares(inputs, y.sum())
+            edge_bins, edge_key = _bin_shares(inputs, y[edges].sum())
             planes_per_bin = spec.sensor.planes / 16
             rows.append({"method": name, "light": cell.condition.light, "speed": speed_of(cell.scene.name),
                          "scene": cell.scene.name,
                          "support_planes": float(planes_per_bin / np.sum(bins ** 2)),
                          "centre_share": float(bins[7] + bins[8]),
                          "edge_support_planes": float(planes_per_bin / np.sum(edge_bins ** 2)),
+                         "key_share": key, "edge_key_share": edge_key,
                          **{f"bin{i:02d}": float(b) for i, b in enumerate(bins)},
                          **{f"edge_bin{i:02d}": float(b) for i, b in enumerate(edge_bins)}})
     path = out / "support.csv"

@@ -63,12 +63,17 @@ __all__ = [
 DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "event_representation": "contrast",
                                   "fusion": "gate", "head": "support-count"}
 
+#: What the shipped weights add to it (stage 25, ``reports/neuspike-net/README.md``): the interval
+#: sequence at the key instant, weighed by :class:`~neuspike.nets.network.KeyRefine`.
+SHIPPED_DESIGN: dict[str, Any] = {"key_estimates": "isi-sequence"}
+
 
 def register_methods(register: Callable[..., Any]) -> None:
     """Register ``neuspike-net`` and ``neuspike-net-spike`` (the ``neuspike.methods`` entry point)."""
-    register("neuspike-net", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, "spike_only": False, "motion_gate": "stats"},
+    register("neuspike-net", NeuSpikeNetMethod,
+             params={**DEFAULT_DESIGN, **SHIPPED_DESIGN, "spike_only": False, "motion_gate": "stats"},
              inputs={"spikes", "events"}, weights="neuspike-net.safetensors",
              description="NeuSpike-Net: spike + event fusion U-Net (trained here on the simulator)")
-    register("neuspike-net-spike", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, "spike_only": True},
+    register("neuspike-net-spike", NeuSpikeNetMethod, params={**DEFAULT_DESIGN, **SHIPPED_DESIGN, "spike_only": True},
              inputs={"spikes"}, weights="neuspike-net-spike.safetensors",
              description="NeuSpike-Net, spike-only variant: texture path and decoders")

@@ -40,6 +40,7 @@ from bench import grid as grids
 from neuspike.conditions import Condition
 from neuspike.methods import create
 from neuspike.methods.weights import read_card
+from neuspike.nets.method import CARD_DEFAULTS
 from neuspike.metrics import ssim
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
@@ -62,8 +63,11 @@ def trained_design(folder: str | None, method: str) -> dict[str, str]:
     ``folder``'s weights of ``method`` were trained with (their card; empty for the shipped weights), so
     that any candidate loads."""
     card = read_card(f"{folder}/{method}.safetensors") if folder else None
-    trained = (card or {}).get("model", {}).get("params", {})
-    return {k: trained[k] for k in DESIGN_PARAMS if k in trained}
+    if card is None:
+        return {}
+    trained = card.get("model", {}).get("params", {})
+    # a card written before a parameter existed means that parameter's old default
+    return {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in DESIGN_PARAMS if k in trained or k in CARD_DEFAULTS}
 
 
 def probe_start(doc: str, argv: list[str] | None):

@@ -210,17 +210,18 @@ def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tm
     module = NeuSpikeNetMethod.for_training("neuspike-net", **params).module
     old_card = {k: v for k, v in params.items() if k != "head"}  # a card written before heads and gates existed
     save_safetensors(module, tmp_path / "neuspike-net.safetensors", card={"model": {"params": old_card}})
-    assert create("neuspike-net", weights_dir=tmp_path, head="tanh", motion_gate="none").module.head == "tanh"
+    old = {"weights_dir": tmp_path, "key_estimates": "none"}  # and no key estimates
+    assert create("neuspike-net", **old, head="tanh", motion_gate="none").module.head == "tanh"
     with pytest.raises(FormatError, match="trained for"):
-        create("neuspike-net", weights_dir=tmp_path, head="support", motion_gate="none")
+        create("neuspike-net", **old, head="support", motion_gate="none")
     with pytest.raises(FormatError, match="motion_gate"):  # an old card means no gate
-        create("neuspike-net", weights_dir=tmp_path, head="tanh")
+        create("neuspike-net", **old, head="tanh")
     assert DEFAULT_DESIGN["head"] == "support-count" == create("neuspike-net").module.head  # the shipped weights
 
 
 def test_cards_without_a_transformer_mean_the_fixed_representations(tmp_path):
-    """The shipped cards predate ``transformer``: they load as ``"fixed"`` and are refused by a method
-    built with learned transformers (whose tensors they lack)."""
+    """The shipped weights use the fixed representations (``transformer="fixed"``) and are refused by a
+    method built with learned transformers (whose tensors they lack)."""
     assert create("neuspike-net").params["transformer"] == "fixed"
     with pytest.raises(FormatError, match="transformer"):
         create("neuspike-net", transformer="learned")
@@ -286,7 +287,8 @@ def test_key_intervals_match_a_brute_force_search_and_the_interval_at_the_centre
 
 def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_input():
     """Every interval of a regular train is its period: the five channels are (1 / period) / gain,
-    appended after the 32 by ``encode``; bad names are refused, and cards without the field mean none."""
+    appended after the 32 by ``encode``; bad names are refused, and weights trained with them are
+    refused by a method built without them."""
     from neuspike.nets.representations import key_representation
 
     sample = make_sample(gain=0.5, period=4)
@@ -304,6 +306,7 @@ def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_
         NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi"})
     with pytest.raises(InputError, match="support-count"):
         NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support", "key_estimates": "isi-sequence"})
-    assert create("neuspike-net").params["key_estimates"] == "none"
-    with pytest.raises(FormatError, match="key_estimates"):  # the shipped card predates the field
-        create("neuspike-net", key_estimates="isi-sequence")
+    for name in ("neuspike-net", "neuspike-net-spike"):  # the shipped weights (stage 25) use them
+        assert create(name).params["key_estimates"] == "isi-sequence"
+        with pytest.raises(FormatError, match="key_estimates"):
+            create(name, key_estimates="none")
