@@ -20,6 +20,10 @@ With ``--replace`` the method sets may overlap: a method in a later folder repla
 rows, images and place in the method list of every earlier folder (a network trained further takes
 its old results' place: ``python -m bench.merge --replace reports/light reports/light runs/light-e2vid``).
 
+``--take M1,M2`` reads only those methods from the folders after the first (with ``--replace``, the
+usual way to rejoin a retrained network from a run that also computed other methods, for example to
+simulate the same event history): every other method keeps the first folder's rows and images.
+
 Writing is atomic per file; the output folder may be one of the inputs only if it is the first.
 
 Exit status: 0 merged; 2 folders that do not fit together (the message says what differs).
@@ -83,17 +87,20 @@ def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: bool = False) -> pd.DataFrame:
+def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: bool = False,
+                 take: Sequence[str] | None = None) -> pd.DataFrame:
     """Merge ``folders`` (see the module docstring) into ``out``; returns the merged results.
 
     ``replace``: a method present in several folders keeps only its last folder's rows (otherwise
-    overlapping methods are an error).
+    overlapping methods are an error). ``take``: the only methods read from the folders after the
+    first (None: all); each must be in one of them.
 
     Raises
     ------
     InputError
         Fewer than two folders, a folder that is not a finished sweep, sweeps of different cells,
-        overlapping methods (without ``replace``), or cells missing from a folder.
+        overlapping methods (without ``replace``), cells missing from a folder, or a ``take`` method
+        that no later folder holds.
     """
     import pandas as pd
 
@@ -106,6 +113,14 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     if out.resolve() in {f.resolve() for f in folders[1:]}:
         raise InputError(f"{out}: the output folder may be the first input, not a later one")
     loaded = [_load(f) for f in folders]
+    if take is not None:
+        take = list(dict.fromkeys(take))
+        later = {m for _, _, frame in loaded[1:] for m in pd.unique(frame["method"])}
+        absent = [m for m in take if m not in later]
+        if absent:
+            raise InputError(f"--take {','.join(absent)}: not in any folder after {folders[0]} "
+                             f"(they hold {', '.join(sorted(later))})")
+        loaded = [loaded[0]] + [(c, m, frame[frame["method"].isin(take)]) for c, m, frame in loaded[1:]]
 
     first_id = _identity(loaded[0][0]["sweep"])
     seen: dict[str, Path] = {}
@@ -133,8 +148,8 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     merged = sort_rows(pd.concat(kept, ignore_index=True))
     sweep = dict(loaded[0][0]["sweep"])
     methods: list[str] = []
-    for _, (c, _, _) in zip(folders, loaded):
-        methods += [m for m in c["sweep"].get("methods", []) if m not in methods]
+    for i, (c, _, _) in enumerate(loaded):
+        methods += [m for m in c["sweep"].get("methods", []) if m not in methods and (i == 0 or take is None or m in take)]
     sweep["methods"] = methods
     # the precision each kept method computed with, from the folder its rows come from
     precision = {m: p for f, (c, _, _) in zip(folders, loaded)
@@ -147,20 +162,24 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     metadata["merged_from"] = [{"folder": portable_path(f), **m} for f, (_, m, _) in zip(folders, loaded)]
 
     out.mkdir(parents=True, exist_ok=True)
-    _merge_images(out / "images", [f / "images" for f in folders])
+    _merge_images(out / "images", [f / "images" for f in folders], [None] + [take] * (len(folders) - 1))
     write_text(out / "results.csv", to_csv_text(merged))
     write_json(out / "config.json", {"sweep": sweep, "merged_from": sources})
     write_json(out / "metadata.json", metadata)
     return merged
 
 
-def _merge_images(target: Path, sources: Sequence[Path]) -> None:
+def _merge_images(target: Path, sources: Sequence[Path], methods: Sequence[Sequence[str] | None] | None = None) -> None:
     """Copy each source's ``<scene>/<axis=value>/<method>.png`` into ``target`` (methods are disjoint;
-    the ground truth ``gt.png`` is the same image in every folder, the first one's is kept)."""
-    for src in sources:
+    the ground truth ``gt.png`` is the same image in every folder, the first one's is kept); with
+    ``methods``, only those methods' images of each source (None: all)."""
+    for i, src in enumerate(sources):
         if not src.is_dir() or src.resolve() == target.resolve():
             continue
+        wanted = None if methods is None else methods[i]
         for png in sorted(src.rglob("*.png")):
+            if wanted is not None and png.stem not in wanted:
+                continue
             dest = target / png.relative_to(src)
             if dest.exists() and png.name == "gt.png":
                 continue
@@ -175,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folders", nargs="+", help="two or more finished sweep folders of the same cells")
     p.add_argument("--replace", action="store_true",
                    help="a method in a later folder replaces the same method's results in earlier ones")
+    p.add_argument("--take", metavar="M1,M2", help="read only these methods from the folders after the first "
+                   "(the others keep the first folder's rows and images)")
     p.add_argument("--no-report", action="store_true", help="do not rebuild the report")
     return p
 
@@ -182,7 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        merged = merge_sweeps(args.out, args.folders, replace=args.replace)
+        take = None if args.take is None else [m for m in args.take.split(",") if m]
+        merged = merge_sweeps(args.out, args.folders, replace=args.replace, take=take)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

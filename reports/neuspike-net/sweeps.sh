@@ -1,6 +1,7 @@
 # The full sweeps of the NeuSpike-Net variants, merged into the committed reports (run for stages 4 to 6):
 #     bash reports/neuspike-net/sweeps.sh TAG     (TAG names the run folders: runs/full/AXIS-TAG)
-# firenet-sim is included so that the same event history is simulated as in the committed sweeps.
+# firenet-sim is included so that the same event history is simulated as in the committed sweeps; only
+# the two NeuSpike-Net variants are joined (--take), so the committed firenet-sim rows stay as they were.
 set -e
 TAG=${1:?give a tag for the run folders, e.g. nsn6}
 W=../shared/weights
@@ -9,6 +10,8 @@ python -m bench.sweep --axis light --full --methods $M --weights $W --out runs/f
 python -m bench.sweep --axis motion --full --methods $M --weights $W --out runs/full/motion-$TAG --workers 2 --threads 1 --no-progress --no-report
 python -m bench.noise --level all --full --methods $M --weights $W --out runs/full/noise-$TAG --workers 2 --threads 1 --no-progress --no-report
 python -m bench.fast_motion --full --methods tfp-w8,tfp-w16,tfp-w32,tfp-w64,tfp,tfi,snm,neuspike-net,neuspike-net-spike --weights $W --out runs/full/fast-motion-$TAG --workers 2 --threads 1 --no-progress
-for a in light motion noise; do python -m bench.merge --replace reports/$a reports/$a runs/full/$a-$TAG; done
+for a in light motion noise; do
+    python -m bench.merge --replace --take neuspike-net,neuspike-net-spike reports/$a reports/$a runs/full/$a-$TAG
+done
 python reports/margins.py reports/light reports/motion reports/noise > reports/margins.md
 echo ALLDONE

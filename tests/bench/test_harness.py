@@ -492,3 +492,33 @@ def test_merge_with_replace_takes_a_methods_rows_from_the_last_folder_that_holds
     assert len(merged) == len(old)
     config = json.loads((tmp_path / "m" / "config.json").read_text())
     assert config["sweep"]["methods"] == ["ht-mean", "ht-mean-x2"]
+
+
+def test_merge_take_reads_only_the_named_methods_from_later_folders(plugin, tmp_path):
+    """``--take``: a rerun that also computed another method rejoins only the named one; the other
+    keeps the first folder's rows and place, and a method no later folder holds is refused by name."""
+    from bench.merge import main as merge_main, merge_sweeps
+    from bench.results import to_csv_text
+
+    import dataclasses
+
+    cache = str(tmp_path / "cache")
+
+    def spec(methods):
+        return dataclasses.replace(tiny_spec(methods), axis="light")
+
+    assert run_sweep(spec(["ht-mean", "ht-mean-x2"]), tmp_path / "one", quiet(plugin, cache_dir=cache)).exit_code == 0
+    assert run_sweep(spec(["ht-mean", "ht-mean-x2"]), tmp_path / "new", quiet(plugin, cache_dir=cache)).exit_code == 0
+    rows = read_csv(tmp_path / "new" / "results.csv")
+    rows["value"] = rows["value"] + 1000.0  # where each row came from shows
+    (tmp_path / "new" / "results.csv").write_text(to_csv_text(rows))
+    with pytest.raises(InputError, match="ht-median"):
+        merge_sweeps(tmp_path / "m", [tmp_path / "one", tmp_path / "new"], replace=True, take=["ht-median"])
+    assert merge_main([str(tmp_path / "m"), str(tmp_path / "one"), str(tmp_path / "new"), "--replace",
+                       "--take", "ht-mean", "--no-report"]) == 0
+    merged, old = read_csv(tmp_path / "m" / "results.csv"), read_csv(tmp_path / "one" / "results.csv")
+    assert (merged.loc[merged["method"] == "ht-mean", "value"].dropna() >= 1000.0).all()
+    x2 = merged[merged["method"] == "ht-mean-x2"].reset_index(drop=True)
+    same_numbers(x2, old[old["method"] == "ht-mean-x2"].reset_index(drop=True))
+    assert len(merged) == len(old)
+    assert json.loads((tmp_path / "m" / "config.json").read_text())["sweep"]["methods"] == ["ht-mean", "ht-mean-x2"]
