@@ -83,55 +83,49 @@ def spike_window(u8, edges, centres, gain, band_rows, out):
 
 
 @njit(parallel=True, **_JIT)
-def key_window(u8, centre, side, gain, out):
-    """The interval sequence around plane ``centre`` divided by ``gain`` into ``out`` (2 side + 1, H, W)
-    float32 (:func:`neuspike.nets.representations.key_intervals`, bit for bit).
+def key_window(u8, centre, gain, out):
+    """The interval sequence around plane ``centre`` divided by ``gain`` into ``out`` (5, H, W) float32
+    (:func:`neuspike.nets.representations.key_intervals` with two intervals a side, bit for bit).
 
-    Per row, the planes are read outwards from the centre, row by row, until every pixel of the row
-    has its ``side + 1`` nearest spikes on that side (or the window ends).
+    Per row, a forward pass over the planes before the centre keeps each pixel's last three spikes
+    (a shift register updated by products with the 0/1 plane, which vectorise) and a backward pass over the planes from the
+    end down to the centre keeps the first three at or after it; both stream whole rows.
     """
     t_len, h, w = u8.shape
-    need = side + 1
     for r in prange(h):
-        before = np.full((need, w), -t_len, np.int32)
-        after = np.full((need, w), 2 * t_len, np.int32)
+        p1 = np.full(w, -t_len, np.int32)
+        p2 = np.full(w, -t_len, np.int32)
+        p3 = np.full(w, -t_len, np.int32)
         n_b = np.zeros(w, np.int32)
+        for t in range(centre):
+            row = u8[t, r]
+            for x in range(w):
+                s = np.int32(row[x])  # 0 or 1: the selects as products, which vectorise
+                p3[x] += s * (p2[x] - p3[x])
+                p2[x] += s * (p1[x] - p2[x])
+                p1[x] += s * (t - p1[x])
+                n_b[x] += s
+        a1 = np.full(w, 2 * t_len, np.int32)
+        a2 = np.full(w, 2 * t_len, np.int32)
+        a3 = np.full(w, 2 * t_len, np.int32)
         n_a = np.zeros(w, np.int32)
-        left = w
-        for t in range(centre - 1, -1, -1):
+        for t in range(t_len - 1, centre - 1, -1):
             row = u8[t, r]
             for x in range(w):
-                if row[x] != 0 and n_b[x] < need:
-                    before[n_b[x], x] = t
-                    n_b[x] += 1
-                    if n_b[x] == need:
-                        left -= 1
-            if left == 0:
-                break
-        left = w
-        for t in range(centre, t_len):
-            row = u8[t, r]
-            for x in range(w):
-                if row[x] != 0 and n_a[x] < need:
-                    after[n_a[x], x] = t
-                    n_a[x] += 1
-                    if n_a[x] == need:
-                        left -= 1
-            if left == 0:
-                break
+                s = np.int32(row[x])
+                a3[x] += s * (a2[x] - a3[x])
+                a2[x] += s * (a1[x] - a2[x])
+                a1[x] += s * (t - a1[x])
+                n_a[x] += s
         for x in range(w):
-            mid = np.float32(1.0) / np.float32(after[0, x] - before[0, x])
-            out[side, r, x] = mid / gain
-            prev = mid
-            for k in range(1, side + 1):
-                if n_b[x] >= k:
-                    prev = np.float32(1.0) / np.float32(before[k - 1, x] - before[k, x])
-                out[side - k, r, x] = prev / gain
-            prev = mid
-            for k in range(1, side + 1):
-                if n_a[x] >= k:
-                    prev = np.float32(1.0) / np.float32(after[k, x] - after[k - 1, x])
-                out[side + k, r, x] = prev / gain
+            mid = np.float32(1.0) / np.float32(a1[x] - p1[x])
+            out[2, r, x] = mid / gain
+            one = np.float32(1.0) / np.float32(p1[x] - p2[x]) if n_b[x] >= 1 else mid
+            out[1, r, x] = one / gain
+            out[0, r, x] = (np.float32(1.0) / np.float32(p2[x] - p3[x]) if n_b[x] >= 2 else one) / gain
+            one = np.float32(1.0) / np.float32(a2[x] - a1[x]) if n_a[x] >= 1 else mid
+            out[3, r, x] = one / gain
+            out[4, r, x] = (np.float32(1.0) / np.float32(a3[x] - a2[x]) if n_a[x] >= 2 else one) / gain
 
 
 @njit(**_JIT)

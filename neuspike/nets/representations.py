@@ -258,11 +258,11 @@ def key_representation(sample: Sample, kind: str, *, backend: str = "auto") -> n
     planes = _planes(sample)
     gain, _ = spike_gain(sample)
     centre = planes.shape[0] // 2
-    if _kernels_usable(backend):
+    if _kernels_usable(backend) and KEY_SIDE == 2:  # the kernel keeps three spikes a side
         u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
         out = np.empty((2 * KEY_SIDE + 1, *planes.shape[1:]), np.float32)
         with KERNEL_LOCK:
-            _kernels.key_window(np.ascontiguousarray(u8), centre, KEY_SIDE, np.float32(gain), out)
+            _kernels.key_window(np.ascontiguousarray(u8), centre, np.float32(gain), out)
         return out
     return key_intervals(planes, centre) / np.float32(gain)
 

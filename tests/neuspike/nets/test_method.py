@@ -281,7 +281,7 @@ def test_key_intervals_match_a_brute_force_search_and_the_interval_at_the_centre
     except ImportError:  # pragma: no cover - numba missing
         return
     out = np.empty_like(ref)
-    kernels.key_window(planes.view(np.uint8), 128, 2, np.float32(0.3), out)
+    kernels.key_window(planes.view(np.uint8), 128, np.float32(0.3), out)
     assert np.array_equal(out, ref / np.float32(0.3))
 
 
