@@ -415,10 +415,12 @@ class NeuSpikeNet(nn.Module):
         return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts, key)
 
     def _split(self, spikes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """The 32 representation channels and the key estimates after them (None without them)."""
+        """The 32 representation channels and the key estimates after them (None without them). The 32
+        are copied to a contiguous tensor, so every layer computes on the layout of a network without
+        the estimates, and weights trained without them give the same images bit for bit."""
         if not self.key_channels:
             return spikes, None
-        return spikes[:, : self.in_channels], spikes[:, self.in_channels:]
+        return spikes[:, : self.in_channels].contiguous(), spikes[:, self.in_channels:]
 
     def _transform(self, name: str, x: torch.Tensor) -> torch.Tensor:
         """The learned input transformer ``name`` applied to ``x``, or ``x`` (``"fixed"``)."""
