@@ -149,7 +149,8 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     sweep = dict(loaded[0][0]["sweep"])
     methods: list[str] = []
     for i, (c, _, _) in enumerate(loaded):
-        methods += [m for m in c["sweep"].get("methods", []) if m not in methods and (i == 0 or take is None or m in take)]
+        wanted = [m for m in c["sweep"].get("methods", []) if i == 0 or take is None or m in take]
+        methods += [m for m in wanted if m not in methods]
     sweep["methods"] = methods
     # the precision each kept method computed with, from the folder its rows come from
     precision = {m: p for f, (c, _, _) in zip(folders, loaded)

@@ -373,7 +373,8 @@ class NeuSpikeNet(nn.Module):
         (B, 1, H, W) or (B, 1, 1, 1)) comes last, for the ``"support-count"`` head only.
         ``parts=True`` (the ``"support"`` heads only) returns ``(image, convex)``, ``convex`` the
         head's convex combination of the spike estimates before the correction is added
-        (``image = convex + correction``, plus the key refinement with ``key_estimates``), so a loss can score the chosen temporal support itself.
+        (``image = convex + correction``, plus the key refinement with ``key_estimates``), so a loss
+        can score the chosen temporal support itself.
         """
         rest = list(rest)
         quantum = rest.pop() if self.takes_quantum and rest and (self.spike_only or len(rest) == 2) else None

@@ -2,7 +2,8 @@
 
 Per window (:func:`spike_window`, :func:`contrast_window`): one pass over the planes (rows in
 parallel bands; each band keeps, per pixel, the running group count, the last spike and the centres
-still waiting for their next spike) and one pass over the window's events. The float arithmetic is
+still waiting for their next spike) and one pass over the window's events; :func:`key_window`, the
+interval sequence at the key instant, one more pass over the planes (rows in parallel). The float arithmetic is
 the NumPy reference's, operation for operation (:mod:`neuspike.nets.representations`), so the
 results are equal bit for bit.
 
@@ -88,8 +89,9 @@ def key_window(u8, centre, gain, out):
     (:func:`neuspike.nets.representations.key_intervals` with two intervals a side, bit for bit).
 
     Per row, a forward pass over the planes before the centre keeps each pixel's last three spikes
-    (a shift register updated by products with the 0/1 plane, which vectorise) and a backward pass over the planes from the
-    end down to the centre keeps the first three at or after it; both stream whole rows.
+    (a shift register updated by products with the 0/1 plane, which vectorise) and a backward pass
+    over the planes from the end down to the centre keeps the first three at or after it; both
+    stream whole rows.
     """
     t_len, h, w = u8.shape
     for r in prange(h):

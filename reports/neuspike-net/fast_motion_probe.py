@@ -59,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--weights", default="../shared/weights", help="weights folder (the shipped ones are found anyway)")
     p.add_argument("--weights-file", help="a candidate's fusion weights (.safetensors) instead of the shipped ones")
     p.add_argument("--support-cue", default="none", choices=("none", "spread"), help="the candidate's support cue")
-    p.add_argument("--key-estimates", default="none", choices=("none", "isi-sequence"), help="the candidate's key estimates")
+    p.add_argument("--key-estimates", default="none", choices=("none", "isi-sequence"),
+                   help="the candidate's key estimates")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     folder, extra = args.weights, {}

@@ -67,7 +67,7 @@ def trained_design(folder: str | None, method: str) -> dict[str, str]:
         return {}
     trained = card.get("model", {}).get("params", {})
     # a card written before a parameter existed means that parameter's old default
-    return {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in DESIGN_PARAMS if k in trained or k in CARD_DEFAULTS}
+    return {k: trained.get(k, CARD_DEFAULTS[k]) for k in DESIGN_PARAMS}
 
 
 def probe_start(doc: str, argv: list[str] | None):
