@@ -83,6 +83,10 @@ class Trainer:
         if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
             from neuspike.methods.weights import load_safetensors, load_state_strict
 
+            if not Path(spec.init_from).is_file():
+                raise InputError(f"init_from {spec.init_from}: no such file. The spec continues earlier weights; "
+                                 "put them there first (the network's reports README gives each stage's command, "
+                                 "e.g. a copy of the shipped weights or a file from the git history)")
             state = load_safetensors(spec.init_from)
             load_state_strict(self.module, state, spec.init_from,
                               may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))

@@ -158,6 +158,9 @@ def test_a_second_stage_starts_from_the_first_and_exports_only_improvements(tmp_
     weights = tmp_path / "a" / "run" / "neuspike-net.safetensors"
     with pytest.raises(InputError, match="safetensors"):
         tiny_spec(tmp_path / "b", shard_dir=shard, init_from=str(tmp_path / "w.pt"))
+    with pytest.raises(InputError, match="init_from .*no such file"):  # named, before the run folder exists
+        Trainer(tiny_spec(tmp_path / "c", shard_dir=shard, init_from=str(tmp_path / "gone.safetensors")), quiet=True)
+    assert not (tmp_path / "c").exists()
     second = Trainer(tiny_spec(tmp_path / "b", shard_dir=shard, steps=2, init_from=str(weights)), quiet=True)
     from neuspike.methods.weights import load_safetensors
 
