@@ -119,7 +119,8 @@ def test_learning_rate_warms_up_then_decays_to_the_floor(tmp_path):
 def test_the_loss_falls_on_a_fixed_batch(tmp_path, one_torch_thread):
     trainer = Trainer(tiny_spec(tmp_path, lr=2e-3, warmup=1, steps=1000), quiet=True)
     g = torch.Generator().manual_seed(0)
-    spikes = torch.rand(2, 32, 16, 16, generator=g)
+    # the shipped design's spike input: the 32 channels and the key estimates after them
+    spikes = torch.rand(2, 32 + trainer.module.key_channels, 16, 16, generator=g)
     events = torch.randn(2, 32, 16, 16, generator=g)
     # not the mean of the spike channels, which the support head gives before any step
     target = 0.5 * spikes[:, :1] + 0.5 * torch.sigmoid(events[:, :1])
