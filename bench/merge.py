@@ -170,7 +170,8 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     return merged
 
 
-def _merge_images(target: Path, sources: Sequence[Path], methods: Sequence[Sequence[str] | None] | None = None) -> None:
+def _merge_images(target: Path, sources: Sequence[Path],
+                  methods: Sequence[Sequence[str] | None] | None = None) -> None:
     """Copy each source's ``<scene>/<axis=value>/<method>.png`` into ``target`` (methods are disjoint;
     the ground truth ``gt.png`` is the same image in every folder, the first one's is kept); with
     ``methods``, only those methods' images of each source (None: all)."""

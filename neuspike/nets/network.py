@@ -106,6 +106,7 @@ from torch import nn
 
 from neuspike.errors import InputError
 from neuspike.nets.fusion import make_fusion
+from neuspike.nets.representations import KEY_CHANNELS
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
 __all__ = ["HEADS", "InputTransformer", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
@@ -125,7 +126,7 @@ TRANSFORMERS = ("fixed", "learned")
 #: The support head's cues (module docstring).
 SUPPORT_CUES = ("none", "spread")
 #: Extra spike estimates at the key instant and the channels each adds to the spike input (module docstring).
-KEY_ESTIMATES = {"none": 0, "isi-sequence": 5}
+KEY_ESTIMATES = KEY_CHANNELS
 
 
 def pad_to_multiple(x: torch.Tensor, multiple: int = MULTIPLE) -> torch.Tensor:

@@ -43,9 +43,9 @@ try:  # numba is a dependency, but the representations must still work where it 
 except ImportError:  # pragma: no cover - exercised only without numba
     _kernels = None
 
-__all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "KEY_ESTIMATES", "KEY_SIDE", "SPIKE_REPRESENTATIONS",
-           "event_representation", "key_intervals", "key_representation", "spike_gain", "spike_quantum",
-           "spike_representation"]
+__all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "KEY_CHANNELS", "KEY_ESTIMATES", "KEY_SIDE",
+           "SPIKE_REPRESENTATIONS", "as_u8", "event_representation", "key_intervals", "key_representation",
+           "spike_gain", "spike_quantum", "spike_representation"]
 
 #: Channels of either representation (the supplement's 32).
 CHANNELS = 32
@@ -57,10 +57,16 @@ NOMINAL_EVENT_THRESHOLD = 0.2
 BACKENDS = ("auto", "numba", "numpy")
 #: Rows per parallel band of the spike kernel.
 BAND_ROWS = 8
-#: Extra spike estimates at the key instant (:func:`key_representation`): none, or the interval sequence.
-KEY_ESTIMATES = ("none", "isi-sequence")
 #: Intervals on each side of the one that holds the key instant (``2 * KEY_SIDE + 1`` channels).
 KEY_SIDE = 2
+#: Extra spike estimates at the key instant (:func:`key_representation`) and the channels each adds.
+KEY_CHANNELS = {"none": 0, "isi-sequence": 2 * KEY_SIDE + 1}
+KEY_ESTIMATES = tuple(KEY_CHANNELS)
+
+
+def as_u8(planes: np.ndarray) -> np.ndarray:
+    """Spike planes as uint8 0/1 (a view of a boolean array, no copy)."""
+    return planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
 
 
 def _kernels_usable(backend: str = "auto") -> bool:
@@ -116,7 +122,7 @@ def _bin_rates(planes: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray]:
     """
     t = planes.shape[0]
     edges = np.round(np.linspace(0, t, bins + 1)).astype(np.int64)
-    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).astype(np.uint8)
+    u8 = as_u8(planes)
     counts = np.add.reduceat(u8, edges[:-1], axis=0, dtype=np.uint16).astype(np.float32)
     return counts / np.diff(edges).astype(np.float32)[:, None, None], edges
 
@@ -137,7 +143,7 @@ def interval_rate(planes: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """
     t, h, w = planes.shape
     centres = np.asarray(centres, dtype=np.int64)
-    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+    u8 = as_u8(planes)
     idx = np.int16
     # prev(c): the last spike plane < c, for every centre, by a forward pass
     prev = np.full((h, w), -t, idx)
@@ -192,7 +198,7 @@ def spike_representation(sample: Sample, kind: str, *, backend: str = "auto") ->
     edges, centres = _edges_centres(planes.shape[0], kind)
     gain, _ = spike_gain(sample)
     if _kernels_usable(backend):
-        u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+        u8 = as_u8(planes)
         out = np.empty((CHANNELS, *planes.shape[1:]), np.float32)
         with KERNEL_LOCK:
             _kernels.spike_window(np.ascontiguousarray(u8), edges, centres, np.float32(gain), BAND_ROWS, out)
@@ -220,7 +226,7 @@ def key_intervals(planes: np.ndarray, centre: int, side: int = KEY_SIDE) -> np.n
     t, h, w = planes.shape
     if not 0 < centre < t:
         raise InputError(f"key intervals: the centre {centre} is not inside the {t}-plane window")
-    u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+    u8 = as_u8(planes)
 
     def nth(stack: np.ndarray, first: int, step: int, virtual: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """The planes of the 1st .. (side + 1)-th spike of ``stack`` (ordered away from the centre)."""
@@ -259,7 +265,7 @@ def key_representation(sample: Sample, kind: str, *, backend: str = "auto") -> n
     gain, _ = spike_gain(sample)
     centre = planes.shape[0] // 2
     if _kernels_usable(backend) and KEY_SIDE == 2:  # the kernel keeps three spikes a side
-        u8 = planes.view(np.uint8) if planes.dtype == np.bool_ else (planes != 0).view(np.uint8)
+        u8 = as_u8(planes)
         out = np.empty((2 * KEY_SIDE + 1, *planes.shape[1:]), np.float32)
         with KERNEL_LOCK:
             _kernels.key_window(np.ascontiguousarray(u8), centre, np.float32(gain), out)

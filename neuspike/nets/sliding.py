@@ -142,7 +142,7 @@ class SlidingRepresentation:
         if we <= self._hi:
             return
         new = sample.spikes.planes[self._hi - ws:]
-        u8 = new.view(np.uint8) if new.dtype == np.bool_ else (new != 0).view(np.uint8)
+        u8 = reps.as_u8(new)
         with KERNEL_LOCK:
             k.advance_spikes(np.ascontiguousarray(u8), self._hi, self._cnt, self._last, self._first, self._running,
                              self._last_now)
