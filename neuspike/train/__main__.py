@@ -20,13 +20,14 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "edge_ssim_weight", "scale_range", "crop_trim")
+               "edge_ssim_weight", "scale_range", "crop_trim",
+               "spike_floor_weight", "train_parts")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight", "edge_ssim_weight",
-              "crop_trim", "size", "view", "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
+              "crop_trim", "spike_floor_weight", "train_parts", "size", "view", "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 
@@ -137,6 +138,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--crop-trim", type=int, metavar="N",
                    help="single windows: cut 0..N rows and 0..N columns (drawn per step) off each batch's crops, so "
                         "the network trains on sides that it pads as at inference (0..7; default 0)")
+    d.add_argument("--spike-floor-weight", type=float, metavar="W",
+                   help="single windows, fusion networks: add W x the batch mean of max(0, crop loss of the fusion - "
+                        "crop loss of its own spike-only forward) to the fusion steps' loss (default 0)")
+    d.add_argument("--train-parts", choices=("all", "motion"),
+                   help="single windows, fusion networks with --init-from: 'motion' trains the motion path only and "
+                        "holds the rest (so the spike-only variant stays as given; default all)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -230,7 +237,8 @@ def spec_from_args(args: argparse.Namespace):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
-                 "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim"):
+                 "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
+                 "spike_floor_weight", "train_parts"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

@@ -91,7 +91,13 @@ class Trainer:
             load_state_strict(self.module, state, spec.init_from,
                               may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
             lacked = {n for n, _ in self.module.named_parameters() if n not in state}
-        named = list(self.module.named_parameters())
+        held = getattr(self.task, "held", lambda name: False)
+        named = []
+        for n, p in self.module.named_parameters():
+            if held(n):
+                p.requires_grad_(False)  # held as init_from gave it (train_parts)
+            else:
+                named.append((n, p))
         groups = [{"params": [p for n, p in named if n not in lacked], "lr_scale": 1.0}]
         if lacked:  # new parts start from nothing: they learn at new_parts_lr_scale times the rate
             groups.append({"params": [p for n, p in named if n in lacked], "lr_scale": spec.new_parts_lr_scale})

@@ -157,6 +157,19 @@ class WindowData:
         inference (a 400x250 frame gains 6 zero rows; a network that pads inside and normalises its
         features over the padded map never saw that in training, and at high noise the band cost the
         fusion 2.3 dB at the sweeps' frame). 0 to 7; 0 (the default, earlier specs): square crops.
+    spike_floor_weight : float
+        Fusion networks only: adds spike_floor_weight * the batch mean of ``relu(l_fusion - l_spike)``
+        on the fusion steps, ``l`` each crop's own L1 + ``ssim_weight`` * SSIM loss and ``l_spike`` that
+        of the spike-only forward of the same weights on the same crop, computed without gradient. The
+        fusion is pushed to be no worse than its own spike-only self crop by crop; where the events
+        only hurt (heavy noise) the motion gate can shut them out, since ``F(t, 0) = t``. Default 0
+        (off; earlier specs mean 0).
+    train_parts : ``"all"`` or ``"motion"``
+        ``"motion"`` (fusion networks, with ``init_from``): only the motion path learns (the motion
+        encoder, the fusion modules, the motion gate, the event transformer); the texture path, the
+        residual blocks, the decoders and the head are held as ``init_from`` gave them, so the spike-only
+        variant the run exports is those weights bit for bit, and every step is a fusion step
+        (``spike_only_fraction`` is not used). Default ``"all"``.
     """
 
     kind: ClassVar[str] = "windows"
@@ -180,9 +193,16 @@ class WindowData:
     val_view: tuple[int, int] | None = None
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
+    spike_floor_weight: float = 0.0
+    train_parts: str = "all"
+
+    #: What ``train_parts`` may be.
+    TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
 
     def __post_init__(self) -> None:
         put = object.__setattr__
+        if self.train_parts not in self.TRAIN_PARTS:
+            raise InputError(f"train_parts: expected one of {self.TRAIN_PARTS}, got {self.train_parts!r}")
         if isinstance(self.crop_trim, bool) or not isinstance(self.crop_trim, int) or not 0 <= self.crop_trim <= 7:
             raise InputError(f"crop_trim: expected a whole number of pixels 0..7, got {self.crop_trim!r}")
         for name in ("view", "train_items", "val_items", "workers", "ssim_window"):
@@ -192,7 +212,7 @@ class WindowData:
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
-        for name in ("support_weight", "edge_ssim_weight"):
+        for name in ("support_weight", "edge_ssim_weight", "spike_floor_weight"):
             put(self, name, _loss_weight(name, getattr(self, name)))
         if self.val_view is not None:
             try:
@@ -469,6 +489,9 @@ class TrainSpec:
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
         if isinstance(self.data, WindowData):
+            if self.data.train_parts != "all" and self.init_from is None:
+                raise InputError(f"train_parts {self.data.train_parts!r}: holds the other parts as init_from gives "
+                                 "them; give init_from (trained weights), or train_parts 'all'")
             if self.crop > self.data.view:
                 raise InputError(f"crop: {self.crop} is larger than the simulated view {self.data.view}")
             if self.crop % 8:

@@ -276,6 +276,11 @@ class WindowTask:
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
       exported as ``<name>-spike``.
+    * **spike floor**: with ``spike_floor_weight``, each fusion step also runs the spike-only forward
+      of the same crops without gradient and adds the weight times the batch mean of
+      ``relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss.
+    * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
+      learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
       the best PSNR exports.
     """
@@ -292,6 +297,9 @@ class WindowTask:
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
         self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
+        if (self.data.spike_floor_weight or self.data.train_parts != "all") and not self.fusion:
+            raise InputError(f"spike_floor_weight {self.data.spike_floor_weight}, train_parts "
+                             f"{self.data.train_parts!r}: fusion networks only (the network has no motion path)")
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
             raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")
@@ -364,8 +372,23 @@ class WindowTask:
     def step_variant(self, step: int) -> str:
         if not self.fusion:
             return "single"
+        if self.data.train_parts == "motion":  # a spike-only step would train nothing
+            return "fusion"
         spike = derive_rng(self.spec.seed, "modality", step).random() < self.data.spike_only_fraction
         return "spike" if spike else "fusion"
+
+    def held(self, name: str) -> bool:
+        """Whether parameter ``name`` is held (does not learn) in this run (``train_parts``)."""
+        return self.data.train_parts == "motion" and not name.startswith(MOTION_PREFIXES)
+
+    def crop_losses(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """Each crop's own L1 + ``ssim_weight`` * SSIM loss, (B,): the batch mean of it is the main loss."""
+        import kornia
+
+        pred = pred.float()
+        l1 = (pred - target).abs().mean(dim=(1, 2, 3))
+        ssim_map = kornia.metrics.ssim(pred, target, window_size=self.data.ssim_window, max_val=1.0)
+        return l1 + self.data.ssim_weight * ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
 
     def forward(self, inputs: Sequence[torch.Tensor], variant: str, *, parts: bool = False
                 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
@@ -417,6 +440,13 @@ class WindowTask:
         with autocast():
             pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
         loss, parts = self.loss(pred, target)
+        if self.data.spike_floor_weight and variant == "fusion":
+            with torch.no_grad(), autocast():
+                floor = self.forward(inputs, "spike")
+            image = pred[0] if isinstance(pred, tuple) else pred
+            excess = (self.crop_losses(image, target) - self.crop_losses(floor, target)).clamp_min(0.0).mean()
+            loss = loss + self.data.spike_floor_weight * excess
+            parts["spike_floor"] = excess.item()
         return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
 
     @torch.no_grad()

@@ -342,6 +342,91 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     _check_loss_weight_field("edge_ssim_weight")
 
 
+def test_the_crop_losses_average_to_the_main_loss():
+    """Each crop's own L1 + SSIM loss (the spike floor's measure) averages over the batch to the loss."""
+    from neuspike.methods import create
+    from neuspike.train.windows import WindowTask
+
+    task = WindowTask(TrainSpec(data=WindowData(ssim_weight=0.7)), create("neuspike-net", precision="float32"))
+    gen = torch.Generator().manual_seed(3)
+    target = torch.rand(3, 1, 24, 24, generator=gen)
+    pred = (target + 0.2 * torch.randn(3, 1, 24, 24, generator=gen)).clamp(0, 1)
+    per_crop = task.crop_losses(pred, target)
+    assert per_crop.shape == (3,)
+    assert float(per_crop.mean()) == pytest.approx(float(task.loss(pred, target)[0]), rel=1e-5)
+    assert float(task.crop_losses(target, target).abs().max()) == pytest.approx(0.0, abs=1e-6)
+
+
+def _fusion_step(task) -> int:
+    return next(k for k in range(100) if task.step_variant(k) == "fusion")
+
+
+def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_vanishes_with_a_shut_gate(
+        tmp_path, one_torch_thread):
+    """spike_floor_weight w adds w * mean(relu(l_fusion - l_spike)) on a fusion step (the two forwards
+    computed by hand here) and nothing on a spike-only step; with the motion gate shut (g = 0) the fusion
+    is its spike-only self (F(t, 0) = t), so the term is 0. Spike-only networks refuse it by name."""
+    from neuspike.methods import create
+    from neuspike.train.windows import WindowTask
+
+    with pytest.raises(InputError, match="spike_floor_weight.*fusion networks only"):
+        WindowTask(TrainSpec(data=WindowData(spike_floor_weight=1.0)), create("neuspike-net-spike"))
+    _check_loss_weight_field("spike_floor_weight")
+    spec = tiny_spec(tmp_path, spike_floor_weight=2.0, params={"motion_gate": "stats"})
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    plain = WindowTask(tiny_spec(tmp_path, params={"motion_gate": "stats"}), trainer.method)
+    plain.train_paths = trainer.task.train_paths
+    task = trainer.task
+    step = _fusion_step(task)
+    with torch.no_grad():
+        loss, parts = task.step_loss(step, trainer.autocast)
+        base, _ = plain.step_loss(step, trainer.autocast)
+        inputs, target = task.batch(step)
+        excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
+                  - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0).mean()
+    assert parts["spike_floor"] == pytest.approx(float(excess), rel=1e-5, abs=1e-7)
+    assert float(loss - base) == pytest.approx(2.0 * float(excess), rel=1e-4, abs=1e-7)
+    spike_step = next(k for k in range(100) if task.step_variant(k) == "spike")
+    with torch.no_grad():
+        assert "spike_floor" not in task.step_loss(spike_step, trainer.autocast)[1]
+        gate = trainer.module.motion_gate.mlp[2]
+        gate.bias.fill_(-60.0)  # 2 sigmoid(-60): the motion features scaled by ~1e-26
+        shut, shut_parts = task.step_loss(step, trainer.autocast)
+        assert torch.allclose(task.forward(inputs, "fusion"), task.forward(inputs, "spike"), atol=1e-6)
+    assert shut_parts["spike_floor"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
+    """train_parts='motion' trains only the motion path: every other parameter (so the spike-only variant)
+    ends as init_from gave it, the motion parameters move; it needs init_from and a fusion network."""
+    from neuspike.methods.weights import load_safetensors
+    from neuspike.train.windows import MOTION_PREFIXES
+
+    with pytest.raises(InputError, match="train_parts"):
+        WindowData(train_parts="decoders")
+    with pytest.raises(InputError, match="train_parts 'motion'.*init_from"):
+        tiny_spec(tmp_path, train_parts="motion")
+    shard = str(tmp_path / "shard")
+    Trainer(tiny_spec(tmp_path / "a", shard_dir=shard, steps=1, params={"motion_gate": "stats"}), quiet=True).run()
+    weights = tmp_path / "a" / "run" / "neuspike-net.safetensors"
+    saved = load_safetensors(weights)
+    spec = tiny_spec(tmp_path / "b", shard_dir=shard, steps=3, init_from=str(weights), train_parts="motion",
+                     spike_floor_weight=1.0, params={"motion_gate": "stats"}, lr=1e-3)
+    second = Trainer(spec, quiet=True)
+    assert {second.task.step_variant(k) for k in range(20)} == {"fusion"}  # a spike-only step would train nothing
+    second.run()
+    moved = 0
+    for k, v in second.module.state_dict().items():
+        if k.startswith(MOTION_PREFIXES):
+            moved += not torch.equal(v, saved[k].to(v.dtype))
+        else:
+            assert torch.equal(v, saved[k].to(v.dtype)), k
+    assert moved > 0
+    name, state, _ = second.task.exported("spike", "neuspike-net")
+    assert all(torch.equal(v, saved[k].to(v.dtype)) for k, v in state.items())
+
+
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
     """``val_view`` makes only the validation windows WxH (the sweeps' frame); the training windows,
     their draws and the key of a shard without it are what they were; a run validates on them."""
