@@ -98,9 +98,19 @@ class Trainer:
                 p.requires_grad_(False)  # held as init_from gave it (train_parts)
             else:
                 named.append((n, p))
-        groups = [{"params": [p for n, p in named if n not in lacked], "lr_scale": 1.0}]
+        scaled = {}  # part_lr_scales: the first matching prefix of each parameter
+        for prefix in spec.part_lr_scales:
+            hits = [n for n, _ in named if n.startswith(prefix) and n not in lacked]
+            if not hits:
+                raise InputError(f"part_lr_scales: {prefix!r} names no parameter of {spec.method} that learns "
+                                 f"in this run")
+            scaled.update({n: prefix for n in hits if n not in scaled})
+        groups = [{"params": [p for n, p in named if n not in lacked and n not in scaled], "lr_scale": 1.0}]
         if lacked:  # new parts start from nothing: they learn at new_parts_lr_scale times the rate
             groups.append({"params": [p for n, p in named if n in lacked], "lr_scale": spec.new_parts_lr_scale})
+        for prefix, scale in spec.part_lr_scales.items():
+            if prefix in scaled.values():  # (a prefix whose parameters an earlier one took has no group)
+                groups.append({"params": [p for n, p in named if scaled.get(n) == prefix], "lr_scale": scale})
         if spec.optimizer == "adamw":
             self.optim = torch.optim.AdamW(groups, lr=spec.lr, weight_decay=spec.weight_decay)
         else:

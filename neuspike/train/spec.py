@@ -431,6 +431,12 @@ class TrainSpec:
     new_parts_lr_scale : float
         With ``init_from``: the parts the file lacked learn at this multiple of the schedule's rate
         (1: like the rest). They start from nothing while the rest is already trained.
+    part_lr_scales : dict
+        ``{name prefix: multiple}``: the parameters whose names start with a prefix learn at that
+        multiple of the schedule's rate (the first prefix that matches; parts the ``init_from`` file
+        lacked keep ``new_parts_lr_scale``). A small part, such as NeuSpike-Net's motion gate, can so
+        move as far as the rest in a short fine-tuning run. Every prefix must name a parameter that
+        learns. Default ``{}`` (earlier specs mean none).
     export : bool
         Also write the best weights into the package's ``neuspike/trained/``.
     export_dir : str or None
@@ -457,6 +463,7 @@ class TrainSpec:
     params: dict[str, Any] = field(default_factory=dict)
     init_from: str | None = None
     new_parts_lr_scale: float = 1.0
+    part_lr_scales: dict[str, float] = field(default_factory=dict)
     export: bool = False
     export_dir: str | None = None
 
@@ -486,6 +493,14 @@ class TrainSpec:
         if not (isinstance(self.new_parts_lr_scale, (int, float)) and math.isfinite(self.new_parts_lr_scale)
                 and self.new_parts_lr_scale > 0):
             raise InputError(f"new_parts_lr_scale: expected a positive number, got {self.new_parts_lr_scale!r}")
+        if not isinstance(self.part_lr_scales, Mapping):
+            raise InputError(f"part_lr_scales: expected {{name prefix: multiple}}, got {self.part_lr_scales!r}")
+        for prefix, scale in self.part_lr_scales.items():
+            if not isinstance(prefix, str) or not prefix:
+                raise InputError(f"part_lr_scales: expected parameter name prefixes, got {prefix!r}")
+            if isinstance(scale, bool) or not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+                raise InputError(f"part_lr_scales[{prefix!r}]: expected a positive number, got {scale!r}")
+        put(self, "part_lr_scales", {k: float(v) for k, v in self.part_lr_scales.items()})
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
         if isinstance(self.data, WindowData):

@@ -427,6 +427,35 @@ def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_
     assert all(torch.equal(v, saved[k].to(v.dtype)) for k, v in state.items())
 
 
+def test_part_lr_scales_give_a_named_part_its_own_multiple_of_the_rate(tmp_path, one_torch_thread):
+    """part_lr_scales {prefix: k}: those parameters (and only they) learn at k times the schedule's rate;
+    a prefix that names nothing, or a bad multiple, is refused by name; earlier specs mean none."""
+    from neuspike.train.spec import spec_from_dict
+
+    for bad in (0.0, -1.0, float("nan"), True, "2"):
+        with pytest.raises(InputError, match="part_lr_scales"):
+            tiny_spec(tmp_path, part_lr_scales={"motion_gate.": bad})
+    with pytest.raises(InputError, match="part_lr_scales"):
+        tiny_spec(tmp_path, part_lr_scales={"": 2.0})
+    earlier = tiny_spec(tmp_path).as_dict()
+    del earlier["part_lr_scales"]
+    assert spec_from_dict(earlier).part_lr_scales == {}
+    with pytest.raises(InputError, match="'nothing.' names no parameter"):
+        Trainer(tiny_spec(tmp_path / "x", part_lr_scales={"nothing.": 2.0}), quiet=True)
+    spec = tiny_spec(tmp_path / "a", steps=3, params={"motion_gate": "stats"}, part_lr_scales={"motion_gate.": 10.0})
+    trainer = Trainer(spec, quiet=True)
+    trainer.run()
+    rest, gate = trainer.optim.param_groups
+    named = dict(trainer.module.named_parameters())
+    assert {id(p) for p in gate["params"]} == {id(p) for n, p in named.items() if n.startswith("motion_gate.")}
+    assert len(rest["params"]) + len(gate["params"]) == len(named)
+    assert gate["lr"] == pytest.approx(10.0 * rest["lr"]) and rest["lr"] == pytest.approx(learning_rate(spec, 2))
+    again = Trainer(spec, quiet=True)
+    assert again.run()["resumed"]  # the optimiser's groups load back from the checkpoint
+    for a, b in zip(trainer.optim.param_groups, again.optim.param_groups):
+        assert a["lr_scale"] == b["lr_scale"] and len(a["params"]) == len(b["params"])
+
+
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
     """``val_view`` makes only the validation windows WxH (the sweeps' frame); the training windows,
     their draws and the key of a shard without it are what they were; a run validates on them."""
