@@ -24,6 +24,10 @@ error of the image's mean level (image mean minus truth mean) over its windows.
 photographs (40 windows): the selection check for fast motion, which the test itself runs on the
 test photographs.
 
+``--spike-beside`` also scores each folder's spike-only file and prints the fusion's margin over it at
+every point: issue 20 asks the fusion to be above its spike-only variant, which the margins to the
+references do not show.
+
 ``--level network`` scores the images as the network makes them; the default, ``counts``, as the
 method returns them (the mean level counted from the spikes where the gain and dark rate are known).
 """
@@ -76,6 +80,9 @@ def probe_start(doc: str, argv: list[str] | None):
     design (default: the shipped weights). Returns ``(args, method)``."""
     p = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
+    p.add_argument("--spike-beside", action="store_true",
+                   help="with the fusion (the default --method): also score each folder's spike-only file and print "
+                        "the fusion's margin over it at every point (issue 20 asks the fusion to be the better one)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -114,8 +121,13 @@ def main(argv: list[str] | None = None) -> int:
                    help="which variant's weights file each folder is read for (default neuspike-net)")
     p.add_argument("--level", choices=("counts", "network"), default="counts",
                    help="how the image's mean level is set (the method's `level`; default counts)")
+    p.add_argument("--spike-beside", action="store_true",
+                   help="with the fusion (the default --method): also score each folder's spike-only file and print "
+                        "the fusion's margin over it at every point (issue 20 asks the fusion to be the better one)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     args = p.parse_args(argv)
+    if args.spike_beside and args.method != "neuspike-net":
+        p.error("--spike-beside compares the fusion with its spike-only file: give --method neuspike-net")
     folders = args.folders or [None]
     torch.set_num_threads(args.threads)
     samples, keys = [], []
@@ -167,6 +179,21 @@ def main(argv: list[str] | None = None) -> int:
         if margins:
             print(f"    worst margin {min(margins):+.2f} dB, {min(ssim_margins):+.4f} SSIM; "
                   f"largest aligned - raw gap {max(gaps):.2f} dB")
+        if args.spike_beside:
+            spike = create("neuspike-net-spike", weights_dir=folder, precision="float32", level=args.level,
+                           **trained_design(folder, "neuspike-net-spike"))
+            s_raw, _, _, s_structure = _score(spike, samples)
+            print(f"    fusion - its spike-only file ({np.mean(s_raw):.2f} / {np.mean(s_structure):.4f} over the windows):")
+            worst = []
+            for key, pick in groups.items():
+                d_psnr = float(np.mean([raw[i] - s_raw[i] for i in pick]))
+                d_ssim = float(np.mean([structure[i] - s_structure[i] for i in pick]))
+                worst.append((d_psnr, d_ssim))
+                label = key if isinstance(key, str) else f"L = 1/{round(1 / key[0])}, noise {key[1]}"
+                print(f"        {label}: {d_psnr:+.2f} dB / {d_ssim:+.4f} SSIM")
+            print(f"        worst {min(w[0] for w in worst):+.2f} dB, {min(w[1] for w in worst):+.4f} SSIM; "
+                  f"points where the fusion is not above it in both: "
+                  f"{sum(1 for w in worst if w[0] < 0 or w[1] < 0)} of {len(worst)}")
     return 0
 
 
