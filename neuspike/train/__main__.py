@@ -20,14 +20,14 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "edge_ssim_weight", "scale_range", "crop_trim",
-               "spike_floor_weight", "train_parts")
+               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "train_parts")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
-              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight", "edge_ssim_weight",
-              "crop_trim", "spike_floor_weight", "train_parts", "size", "view", "length", "kinds", "hdr_fraction", "view_fraction", "export_dir")
+              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
+              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "train_parts", "size", "view", "length", "kinds",
+              "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 

@@ -297,9 +297,10 @@ class WindowTask:
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
         self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
-        if (self.data.spike_floor_weight or self.data.train_parts != "all") and not self.fusion:
-            raise InputError(f"spike_floor_weight {self.data.spike_floor_weight}, train_parts "
-                             f"{self.data.train_parts!r}: fusion networks only (the network has no motion path)")
+        fusion_only = [f"spike_floor_weight {self.data.spike_floor_weight}"] if self.data.spike_floor_weight else []
+        fusion_only += [f"train_parts {self.data.train_parts!r}"] if self.data.train_parts != "all" else []
+        if fusion_only and not self.fusion:
+            raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
             raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")

@@ -183,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
             spike = create("neuspike-net-spike", weights_dir=folder, precision="float32", level=args.level,
                            **trained_design(folder, "neuspike-net-spike"))
             s_raw, _, _, s_structure = _score(spike, samples)
-            print(f"    fusion - its spike-only file ({np.mean(s_raw):.2f} / {np.mean(s_structure):.4f} over the windows):")
+            print(f"    fusion - its spike-only file ({np.mean(s_raw):.2f} / {np.mean(s_structure):.4f} "
+                  "over the windows):")
             worst = []
             for key, pick in groups.items():
                 d_psnr = float(np.mean([raw[i] - s_raw[i] for i in pick]))

@@ -21,7 +21,8 @@ import torch
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--weights", help="folder holding neuspike-net.safetensors and its card (default: the shipped weights)")
+    ap.add_argument("--weights",
+                    help="folder holding neuspike-net.safetensors and its card (default: the shipped weights)")
     ap.add_argument("--shard", default="runs/shard-stage17", help="a training shard (its val/ windows are read)")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
