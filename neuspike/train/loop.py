@@ -91,10 +91,9 @@ class Trainer:
             load_state_strict(self.module, state, spec.init_from,
                               may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
             lacked = {n for n, _ in self.module.named_parameters() if n not in state}
-        held = getattr(self.task, "held", lambda name: False)
         named = []
         for n, p in self.module.named_parameters():
-            if held(n):
+            if self.task.held(n):
                 p.requires_grad_(False)  # held as init_from gave it (train_parts)
             else:
                 named.append((n, p))

@@ -492,6 +492,10 @@ class SequenceTask:
     def variants(self) -> list[str]:
         return ["main"]
 
+    def held(self, name: str) -> bool:
+        """Whether parameter ``name`` is held in this run: never (every parameter learns)."""
+        return False
+
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
         spec = self.spec
         batch = make_batch(self.train_shard, derive_rng(spec.seed, "batch", step), batch=spec.batch, crop=spec.crop,
