@@ -26,7 +26,7 @@ from neuspike.errors import InputError
 from neuspike.utils.checks import check_int
 
 __all__ = [
-    "DATA_KINDS", "KIND_WEIGHTS", "KINDS", "LIGHTS", "MOTIONS", "NOISE_LEVELS", "SEQUENCE_KINDS",
+    "DATA_KINDS", "KIND_WEIGHTS", "KINDS", "LIGHTS", "MOTIONS", "NOISE_LEVELS", "SEQUENCE_KINDS", "SWEEP_POINTS",
     "SequenceData", "TrainSpec", "WindowData", "learning_rate", "load_spec", "spec_from_dict", "with_out_dir",
 ]
 
@@ -41,6 +41,14 @@ LIGHTS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32)
 #: The noise levels of :mod:`neuspike.conditions` (repeated here so that this module stays light;
 #: a test checks they agree).
 NOISE_LEVELS = ("none", "small", "medium", "high")
+#: The full sweeps' 12 distinct points, (L, S, noise): the light sweep at S = 128, the motion sweep at
+#: L = 1/4 (its S = 128 is the light sweep's L = 1/4), the noise test at L = 1/4, S = 128.
+SWEEP_POINTS: tuple[tuple[float, int, str], ...] = (
+    tuple((light, 128, "none") for light in sorted(LIGHTS))
+    + tuple((1 / 4, m, "none") for m in MOTIONS if m != 128)
+    + tuple((1 / 4, 128, n) for n in ("small", "medium", "high")))
+#: Pan speed of the sweeps (px/s at the 400x250 sensor's scale).
+SWEEP_SPEED_PX_S = 1000.0
 _PHOTO_DEFAULT: tuple[str, ...] = ("astronaut", "brick", "cat", "cell", "coffee", "grass", "hubble_deep_field",
                                    "immunohistochemistry", "page", "rocket")
 
@@ -170,6 +178,15 @@ class WindowData:
         residual blocks, the decoders and the head are held as ``init_from`` gave them, so the spike-only
         variant the run exports is those weights bit for bit, and every step is a fusion step
         (``spike_only_fraction`` is not used). Default ``"all"``.
+    sweep_fraction : float
+        Fraction of cells drawn at the full sweeps' conditions: (L, S, noise) one of the sweeps' 12
+        points (:data:`SWEEP_POINTS`, drawn uniformly) in place of the drawn light, motion scale and
+        noise level, and pans and dead leaves moving at the sweeps' 1000 px/s (scaled as every speed
+        is) in place of a speed from ``speed_range``; the scene kinds, photographs, scales and
+        directions are drawn as for every cell. The mixture spreads light, speed, S and noise
+        independently over wide ranges, so a sweep's point (a slow pan at L = 1/4, S = 128 with heavy
+        noise, say) is a small corner of it. The validation windows are drawn the same way. Default 0
+        (off; earlier specs and their shard keys mean 0).
     """
 
     kind: ClassVar[str] = "windows"
@@ -195,6 +212,7 @@ class WindowData:
     crop_trim: int = 0
     spike_floor_weight: float = 0.0
     train_parts: str = "all"
+    sweep_fraction: float = 0.0
 
     #: What ``train_parts`` may be.
     TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
@@ -207,8 +225,11 @@ class WindowData:
             raise InputError(f"crop_trim: expected a whole number of pixels 0..7, got {self.crop_trim!r}")
         for name in ("view", "train_items", "val_items", "workers", "ssim_window"):
             _whole(name, getattr(self, name), 1)
-        if not 0.0 <= self.spike_only_fraction <= 1.0:
-            raise InputError(f"spike_only_fraction: expected a fraction in [0, 1], got {self.spike_only_fraction}")
+        for name in ("spike_only_fraction", "sweep_fraction"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+                raise InputError(f"{name}: expected a fraction in [0, 1], got {value!r}")
+            put(self, name, float(value))
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
@@ -258,6 +279,8 @@ class WindowData:
             key["val_view"] = list(self.val_view)
         if self.scale_range is not None:  # likewise
             key["scale_range"] = list(self.scale_range)
+        if self.sweep_fraction:  # likewise
+            key["sweep_fraction"] = self.sweep_fraction
         return key
 
 

@@ -48,7 +48,7 @@ from neuspike.scenes.photos import read_photo
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
-from neuspike.train.spec import KIND_WEIGHTS, TrainSpec, WindowData, spec_from_dict
+from neuspike.train.spec import KIND_WEIGHTS, SWEEP_POINTS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
@@ -102,9 +102,11 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
     # validation at the sweeps' frame when asked (whole-frame offsets show only there), else the square view
     size = tuple(data.val_view) if split == "val" and data.val_view is not None else (data.view, data.view)
+    # a cell at one of the sweeps' points (only drawn when asked, so earlier specs draw what they drew)
+    at_sweep = bool(data.sweep_fraction) and bool(rng.random() < data.sweep_fraction)
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
-    speed = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    speed = SWEEP_SPEED_PX_S if at_sweep else float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
     if data.scale_range is None:  # the original draw: the sensor shrunk to the view
         relative_scale = None
         speed *= size[0] / SENSOR_SIZE[0]
@@ -130,14 +132,19 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
                               blade_contrast=float(rng.uniform(0.0, 2.0)))
         else:
             scene = SceneSpec(kind="still", image=image, size=size)
-    lo, hi = data.light_range
-    light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
-    motion = int(data.motions[int(rng.integers(len(data.motions)))])
-    noise = data.noise_levels[int(rng.integers(len(data.noise_levels)))]
+    if at_sweep:
+        light, motion, noise = SWEEP_POINTS[int(rng.integers(len(SWEEP_POINTS)))]
+    else:
+        lo, hi = data.light_range
+        light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+        motion = int(data.motions[int(rng.integers(len(data.motions)))])
+        noise = data.noise_levels[int(rng.integers(len(data.noise_levels)))]
     condition = Condition(light=light, motion=motion, noise=noise, effects=BASE_EFFECTS)
     sim_seed = int(rng.integers(2**31))
     info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
+    if data.sweep_fraction:  # (the descriptions of earlier specs' cells stay as they were)
+        info["at_sweep"] = at_sweep
     return scene, condition, sim_seed, info
 
 

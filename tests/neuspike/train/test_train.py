@@ -89,6 +89,39 @@ def test_scale_range_draws_the_region_at_the_sweeps_scale_and_moves_it_as_a_swee
             WindowData(scale_range=bad)
 
 
+def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_path):
+    """With sweep_fraction p, about p of the cells take one of the 12 sweep points (light, S, noise) and pan at
+    the sweeps' 1000 px/s; the rest draw from the mixture's ranges. p = 0 keeps an earlier spec's key and
+    cell descriptions."""
+    from neuspike.train.spec import SWEEP_POINTS
+
+    # the grid, built independently from the sweeps' presets: 5 lights at S = 128, 4 more S at L = 1/4, 3 noises
+    presets = {(l, 128, "none") for l in (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)} | \
+        {(1 / 4, m, "none") for m in (16, 32, 64, 256)} | {(1 / 4, 128, n) for n in ("small", "medium", "high")}
+    assert len(SWEEP_POINTS) == 12 and set(SWEEP_POINTS) == presets
+    spec = tiny_spec(tmp_path, view=40, speed_range=(5000.0, 20000.0), sweep_fraction=0.5)
+    cells = [draw_cell(spec, "train", i, tmp_path) for i in range(200)]
+    at = [c for c in cells if c[3]["at_sweep"]]
+    assert 70 <= len(at) <= 130  # binomial(200, 0.5): 5 sigma either side
+    for scene, cond, _, info in cells:
+        if info["at_sweep"]:
+            assert (cond.light, cond.motion, cond.noise) in presets
+            if scene.kind in ("pan", "dead_leaves"):  # the sweeps' speed at a view 40 pixels wide
+                assert np.hypot(*scene.velocity_px_s) == pytest.approx(1000.0 * 40 / 400)
+        elif scene.kind in ("pan", "dead_leaves"):
+            assert np.hypot(*scene.velocity_px_s) >= 5000.0 * 40 / 400 - 1e-6
+    assert len({(c[1].light, c[1].motion, c[1].noise) for c in at}) >= 10
+    assert WindowData(sweep_fraction=0.25).key(0)["sweep_fraction"] == 0.25
+    assert "sweep_fraction" not in WindowData().key(0)
+    old = tiny_spec(tmp_path)
+    assert "at_sweep" not in draw_cell(old, "train", 0, tmp_path)[3]
+    everyone = tiny_spec(tmp_path, sweep_fraction=1.0)
+    assert all(draw_cell(everyone, "train", i, tmp_path)[3]["at_sweep"] for i in range(20))
+    for bad in (-0.1, 1.5, True, "half"):
+        with pytest.raises(InputError, match="sweep_fraction"):
+            WindowData(sweep_fraction=bad)
+
+
 def test_saved_windows_load_back_identically(tmp_path):
     spec = tiny_spec(tmp_path)
     s = simulate_cell(spec, "val", 0, tmp_path)
