@@ -93,12 +93,15 @@ def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_
     """With sweep_fraction p, about p of the cells take one of the 12 sweep points (light, S, noise) and pan at
     the sweeps' 1000 px/s; the rest draw from the mixture's ranges. p = 0 keeps an earlier spec's key and
     cell descriptions."""
-    from neuspike.train.spec import SWEEP_POINTS
+    from bench import grid
+    from neuspike.train.spec import SWEEP_POINTS, SWEEP_SPEED_PX_S
 
-    # the grid, built independently from the sweeps' presets: 5 lights at S = 128, 4 more S at L = 1/4, 3 noises
-    presets = {(l, 128, "none") for l in (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)} | \
-        {(1 / 4, m, "none") for m in (16, 32, 64, 256)} | {(1 / 4, 128, n) for n in ("small", "medium", "high")}
+    # the points of the sweeps' own presets (bench.grid): the light sweep, the motion sweep, the noise test
+    presets = {(l, grid.PAPER_FIXED_MOTION, "none") for l in grid.PAPER_LIGHTS} | \
+        {(grid.PAPER_FIXED_LIGHT, m, "none") for m in grid.PAPER_MOTIONS} | \
+        {(grid.PAPER_FIXED_LIGHT, grid.PAPER_FIXED_MOTION, n) for n in grid.PAPER_NOISE_LEVELS}
     assert len(SWEEP_POINTS) == 12 and set(SWEEP_POINTS) == presets
+    assert SWEEP_SPEED_PX_S == grid.PAN_SPEED_PX_S_AT_400
     spec = tiny_spec(tmp_path, view=40, speed_range=(5000.0, 20000.0), sweep_fraction=0.5)
     cells = [draw_cell(spec, "train", i, tmp_path) for i in range(200)]
     at = [c for c in cells if c[3]["at_sweep"]]
