@@ -133,8 +133,10 @@ class NeuSpikeNetMethod(LearnedMethod):
         correction, which keeps the absolute scale) or ``"support-count"`` (the same with the
         correction counted in spikes per group; the shipped weights).
     motion_gate : str
-        ``"none"`` (the paper's) or ``"stats"``: gains on the motion features from the
-        representations' statistics (:class:`~neuspike.nets.network.MotionGate`); fusion network only.
+        ``"none"`` (the paper's), ``"stats"``: gains on the motion features from the
+        representations' statistics (:class:`~neuspike.nets.network.MotionGate`), or ``"stats-local"``:
+        those gains times per-pixel maps from the events' local coherence
+        (:class:`~neuspike.nets.network.LocalGate`); fusion network only.
     transformer : str
         ``"fixed"`` (default; the shipped weights) or ``"learned"``: a learned full-resolution module on
         each representation before its encoder (:class:`~neuspike.nets.network.InputTransformer`).

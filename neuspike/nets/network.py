@@ -46,6 +46,15 @@ Motion gate (``motion_gate``):
   of events over three (rms / sqrt 3), a region hardly at all. So the gate sees how dense and how
   coherent the events are beside the spikes. The MLP's last layer starts at zero, so
   ``g = 1`` and a network built from weights without the gate computes exactly what they computed.
+* ``"stats-local"``: the four gains of ``"stats"`` times four per-pixel maps ``p = 2 sigmoid(conv1x1(
+  relu(conv3x3(c))))`` in (0, 2) (:class:`LocalGate`, 188 parameters), one per level, each averaged
+  over the pixels of its level (x_m^0 full resolution, x_m^1 2x2 blocks, ...). ``c`` is the local
+  coherence of the events: the 3x3 mean of the channel-mean energy ``E = box3(mean_c x^2)`` and
+  ``log(eps + box3(mean_c box3(x)^2)) - log(eps + E)``, near log(1/9) where the events are isolated
+  (noise), near log(1/3) along an edge, near 0 over a region that changes as a whole. A per-image
+  gain scales the noise in flat regions and the edges' events alike; the map can shut the one and
+  keep the other. Its last layer starts at zero (``p = 1``), so ``"stats"`` weights load
+  (``STARTS_AS_IDENTITY``) and compute exactly what they computed.
 
 Input transformers (``transformer``; the paper's T_spike and T_event are learned modules of unknown form):
 
@@ -109,7 +118,7 @@ from neuspike.nets.fusion import make_fusion
 from neuspike.nets.representations import KEY_CHANNELS
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
-__all__ = ["HEADS", "InputTransformer", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
+__all__ = ["HEADS", "InputTransformer", "LocalGate", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
            "KEY_ESTIMATES", "KeyRefine", "SUPPORT_CUES", "SupportCue", "TRANSFORMERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
@@ -120,7 +129,7 @@ MULTIPLE = 8
 #: The prediction heads (module docstring).
 HEADS = ("tanh", "support", "support-count")
 #: The motion gates (module docstring).
-MOTION_GATES = ("none", "stats")
+MOTION_GATES = ("none", "stats", "stats-local")
 #: The input transformers (module docstring).
 TRANSFORMERS = ("fixed", "learned")
 #: The support head's cues (module docstring).
@@ -171,14 +180,17 @@ class MotionGate(nn.Module):
         nn.init.zeros_(self.mlp[2].bias)
 
     @classmethod
-    def statistics(cls, spikes: torch.Tensor, events: torch.Tensor) -> torch.Tensor:
+    def statistics(cls, spikes: torch.Tensor, events: torch.Tensor, boxed: torch.Tensor | None = None
+                   ) -> torch.Tensor:
         """(B, C, H, W) x2 -> (B, 4C): per channel, log(eps + mean |spikes|), log(eps + std spikes),
-        log(eps + rms events), log(eps + rms box3(events))."""
+        log(eps + rms events), log(eps + rms box3(events)). ``boxed``: ``box3(events)`` in float32
+        where the caller has it already."""
         spikes, events = spikes.float(), events.float()
+        boxed = cls.box3(events) if boxed is None else boxed
         mean = spikes.mean(dim=(2, 3), keepdim=True)
         spread = (spikes - mean).square().mean(dim=(2, 3)).sqrt()  # torch's std: 2.4x slower on the CPU
         parts = [spikes.abs().mean(dim=(2, 3)), spread,
-                 events.square().mean(dim=(2, 3)).sqrt(), cls.box3(events).square().mean(dim=(2, 3)).sqrt()]
+                 events.square().mean(dim=(2, 3)).sqrt(), boxed.square().mean(dim=(2, 3)).sqrt()]
         return torch.log(cls.EPS + torch.cat(parts, dim=1))
 
     @staticmethod
@@ -197,8 +209,50 @@ class MotionGate(nn.Module):
 
         return total / (count(h)[:, None] * count(w)[None, :])
 
-    def forward(self, spikes: torch.Tensor, events: torch.Tensor) -> torch.Tensor:
-        return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events)))
+    def forward(self, spikes: torch.Tensor, events: torch.Tensor, boxed: torch.Tensor | None = None) -> torch.Tensor:
+        return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events, boxed)))
+
+
+class LocalGate(nn.Module):
+    """The ``"stats-local"`` maps (module docstring): events (B, C, H, W) before padding -> logits
+    (B, 4, H, W), one channel per level (x_m^0 first); the gains are ``2 sigmoid`` of them. Zero
+    logits at construction (the last layer is zero), so every gain is exactly 1."""
+
+    LEVELS = 4
+    HIDDEN = 8
+    #: Keeps the logarithm of an empty neighbourhood finite.
+    EPS = 1e-3
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.mix = nn.Conv2d(2, self.HIDDEN, 3, padding=1)
+        self.out = nn.Conv2d(self.HIDDEN, self.LEVELS, 1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    @classmethod
+    def statistics(cls, events: torch.Tensor, boxed: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, C, H, W) -> (B, 2, H, W): ``log(eps + E)`` and ``log(eps + box3(mean_c box3(x)^2)) -
+        log(eps + E)``, ``E = box3(mean_c x^2)`` (module docstring). ``boxed``: ``box3(events)`` in
+        float32 where the caller has it already."""
+        events = events.float()
+        boxed = MotionGate.box3(events) if boxed is None else boxed
+        energy = torch.log(cls.EPS + MotionGate.box3(events.square().mean(dim=1, keepdim=True)))
+        coherent = torch.log(cls.EPS + MotionGate.box3(boxed.square().mean(dim=1, keepdim=True)))
+        return torch.cat([energy, coherent - energy], dim=1)
+
+    def forward(self, events: torch.Tensor, boxed: torch.Tensor | None = None) -> torch.Tensor:
+        c = self.statistics(events, boxed).to(self.mix.weight.dtype)
+        return self.out(torch.relu(self.mix(c)))
+
+    @classmethod
+    def level_gains(cls, logits: torch.Tensor, size: tuple[int, int]) -> list[torch.Tensor]:
+        """Logits (B, 4, H, W) -> the gains of x_m^0 .. x_m^3 on the padded grid ``size`` (the logits
+        padded with 0, a gain of 1, then averaged over each level's 2^l x 2^l blocks)."""
+        h, w = logits.shape[-2:]
+        gains = 2.0 * torch.sigmoid(F.pad(logits.float(), (0, size[1] - w, 0, size[0] - h)))
+        return [gains[:, 0:1]] + [F.avg_pool2d(gains[:, level:level + 1], 2 ** level)
+                                  for level in range(1, cls.LEVELS)]
 
 
 class InputTransformer(nn.Module):
@@ -290,7 +344,7 @@ class NeuSpikeNet(nn.Module):
     head : str
         The prediction head, one of :data:`HEADS`.
     motion_gate : str
-        ``"none"`` or ``"stats"`` (:data:`MOTION_GATES`, module docstring); the spike-only network
+        ``"none"``, ``"stats"`` or ``"stats-local"`` (:data:`MOTION_GATES`, module docstring); the spike-only network
         has no motion path and takes ``"none"`` only.
     transformer : str
         ``"fixed"`` or ``"learned"`` (:data:`TRANSFORMERS`, module docstring): a learned
@@ -305,7 +359,7 @@ class NeuSpikeNet(nn.Module):
     """
 
     #: Parts that compute the identity as constructed: weights trained without them start the same network.
-    STARTS_AS_IDENTITY = ("motion_gate.", "spike_transformer.", "event_transformer.", "support_cue.", "key_refine.")
+    STARTS_AS_IDENTITY = ("motion_gate.", "local_gate.", "spike_transformer.", "event_transformer.", "support_cue.", "key_refine.")
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
                  event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none",
@@ -343,8 +397,10 @@ class NeuSpikeNet(nn.Module):
             self.motion = _Encoder(in_channels)
             self.fuse1 = make_fusion(fusion, ENCODER_CHANNELS[0])
             self.fuse2 = make_fusion(fusion, ENCODER_CHANNELS[1])
-            if motion_gate == "stats":
+            if motion_gate in ("stats", "stats-local"):
                 self.motion_gate = MotionGate(in_channels)
+            if motion_gate == "stats-local":
+                self.local_gate = LocalGate()
         self.residual = nn.Sequential(NormResidualBlock(ENCODER_CHANNELS[2]), NormResidualBlock(ENCODER_CHANNELS[2]))
         self.up1 = UpConvNormReLU(ENCODER_CHANNELS[2], DECODER_CHANNELS[0])
         self.up2 = UpConvNormReLU(DECODER_CHANNELS[0] + ENCODER_CHANNELS[1], DECODER_CHANNELS[1])
@@ -398,8 +454,13 @@ class NeuSpikeNet(nn.Module):
             return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts, key)
         m = self.motion(pad_to_multiple(self._transform("event_transformer", events)))
         if hasattr(self, "motion_gate"):
-            g = self.motion_gate(spikes, events).to(m[3].dtype)[:, :, None, None]
+            boxed = MotionGate.box3(events.float()) if hasattr(self, "local_gate") else None
+            g = (self.motion_gate(spikes, events) if boxed is None else self.motion_gate(spikes, events, boxed))
+            g = g.to(m[3].dtype)[:, :, None, None]
             m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
+            if boxed is not None:
+                local = LocalGate.level_gains(self.local_gate(events, boxed), m[0].shape[-2:])
+                m = [p.to(x.dtype) * x for p, x in zip(local, m)]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),
                             t[0] + self.event_skip_weight * m[0], spikes, quantum, (h, w), parts, key)
 

@@ -243,7 +243,7 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 
 
 #: Module tensors only the fusion network has (left out of the spike-only export).
-MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "event_transformer.")
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "local_gate.", "event_transformer.")
 
 
 #: Share of a crop's pixels that :func:`edge_mask` marks (the fast-motion report's edge share).

@@ -1,5 +1,7 @@
 """NeuSpike-Net module: shapes, parameter counts (closed form), padding, fusion identities, spike-only subset."""
 
+import math
+
 import pytest
 import torch
 
@@ -233,6 +235,72 @@ def test_motion_gate_scales_each_level_of_the_motion_path(one_torch_thread):
         NeuSpikeNet(motion_gate="global")
     with pytest.raises(InputError, match="spike-only"):
         NeuSpikeNet(spike_only=True, motion_gate="stats")
+
+
+def test_local_gate_starts_as_the_stats_gate_and_loads_its_weights(one_torch_thread):
+    """``"stats-local"`` adds 188 parameters whose last layer is zero: ``"stats"`` weights load
+    (``may_lack``) and give the same image bit for bit, on a frame whose sides are not multiples of 8."""
+    from neuspike.methods.weights import load_state_strict
+
+    torch.manual_seed(6)
+    stats = NeuSpikeNet(head="support-count", motion_gate="stats").eval()
+    with torch.no_grad():  # a gate that is not the identity, so the comparison covers it
+        stats.motion_gate.mlp[2].bias.copy_(torch.tensor([0.3, -0.2, 0.1, -0.4]))
+    local = NeuSpikeNet(head="support-count", motion_gate="stats-local").eval()
+    extra = sum(p.numel() for p in local.parameters()) - sum(p.numel() for p in stats.parameters())
+    assert extra == (2 * 9 * 8 + 8) + (8 * 4 + 4)
+    load_state_strict(local, stats.state_dict(), "stats", may_lack=local.STARTS_AS_IDENTITY)
+    x, m, q = torch.rand(2, 32, 27, 43), torch.randn(2, 32, 27, 43), torch.full((2, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        assert torch.equal(local(x, m, q), stats(x, m, q))
+        logits = local.local_gate(m)
+    assert logits.shape == (2, 4, 27, 43) and torch.equal(logits, torch.zeros_like(logits))
+    with pytest.raises(InputError, match="spike-only"):
+        NeuSpikeNet(spike_only=True, motion_gate="stats-local")
+
+
+def test_local_gate_statistics_tell_isolated_events_from_edges_and_regions():
+    """At the centre of an analytic pattern of unit events (two channels alike), the energy is the 3x3
+    mean of x^2 and the coherence the 3x3 mean of box3(x)^2 over it: an isolated event 1/9 and
+    (1/81) / (1/9) = 1/9, a straight line 1/3 and (1/9) / (1/3) = 1/3, a uniform region 1 and 1."""
+    from neuspike.nets.network import LocalGate
+
+    h = w = 31
+    point, line, region = torch.zeros(3, 1, 2, h, w)
+    point[..., 15, 15] = 1.0
+    line[..., :, 15] = 1.0
+    region[...] = 1.0
+    eps = LocalGate.EPS
+    expected = {"point": (1 / 9, 1 / 81), "line": (1 / 3, 1 / 9), "region": (1.0, 1.0)}
+    for name, events in (("point", point), ("line", line), ("region", region)):
+        energy, coherent = expected[name]
+        c = LocalGate.statistics(events)[0, :, 15, 15]
+        assert float(c[0]) == pytest.approx(math.log(eps + energy), abs=1e-5), name
+        assert float(c[1]) == pytest.approx(math.log(eps + coherent) - math.log(eps + energy), abs=1e-5), name
+    # the coherence orders noise < edge < region whatever the events' scale (eps aside)
+    scaled = [float(LocalGate.statistics(10.0 * e)[0, 1, 15, 15]) for e in (point, line, region)]
+    assert scaled[0] < scaled[1] < scaled[2]
+    assert scaled[0] == pytest.approx(math.log(1 / 9), abs=0.01) and scaled[1] == pytest.approx(math.log(1 / 3), abs=0.01)
+
+
+def test_local_gate_scales_each_level_by_its_blocks_mean(one_torch_thread):
+    """Saturated logits give gains of 2 everywhere; the gains of a level are the block means of the
+    full-resolution map, and the padding around the frame has a gain of 1."""
+    from neuspike.nets.network import LocalGate
+
+    logits = torch.full((1, 4, 5, 6), -1e4)
+    gains = LocalGate.level_gains(logits, (8, 8))
+    assert [tuple(g.shape[-2:]) for g in gains] == [(8, 8), (4, 4), (2, 2), (1, 1)]
+    assert torch.equal(gains[0][..., :5, :6], torch.zeros(1, 1, 5, 6))
+    assert torch.equal(gains[0][..., 5:, :], torch.ones(1, 1, 3, 8))
+    assert float(gains[3]) == pytest.approx(1.0 - 30 / 64)  # 30 of 64 pixels shut, the rest padding
+    torch.manual_seed(7)
+    net = NeuSpikeNet(head="support-count", motion_gate="stats-local").eval()
+    x, m, q = torch.rand(1, 32, 24, 40), torch.randn(1, 32, 24, 40), torch.full((1, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        net.local_gate.out.bias.fill_(-1e4)  # every map 0 inside the frame: the motion path silenced there
+        silenced = net(x, m, q)
+    assert torch.allclose(silenced, net.forward_texture_only(x, q), atol=1e-6)
 
 
 def test_learned_input_transformers_start_as_the_fixed_network_and_keep_the_fixed_basis(one_torch_thread):
