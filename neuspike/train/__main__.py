@@ -20,13 +20,15 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction")
+               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction",
+               "sweep_scenes")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
-              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction", "size", "view",
+              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction", "sweep_scenes",
+              "size", "view",
               "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
@@ -148,6 +150,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--sweep-fraction", type=float, metavar="P",
                    help="single windows: draw a fraction P of the windows at the full sweeps' 12 points of light, "
                         "motion scale and noise, panning at the sweeps' 1000 px/s (default 0)")
+    d.add_argument("--sweep-scenes", action="store_const", const=True, default=None,
+                   help="single windows, with --sweep-fraction: the sweep cells also take the sweeps' scenes (pan, "
+                        "zoom, fan, still alike, with the sweeps' zoom rate and fan)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -242,7 +247,7 @@ def spec_from_args(args: argparse.Namespace):
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
                  "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
-                 "spike_floor_weight", "train_parts", "sweep_fraction"):
+                 "spike_floor_weight", "train_parts", "sweep_fraction", "sweep_scenes"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

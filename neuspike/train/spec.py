@@ -187,6 +187,15 @@ class WindowData:
         independently over wide ranges, so a sweep's point (a slow pan at L = 1/4, S = 128 with heavy
         noise, say) is a small corner of it. The validation windows are drawn the same way. Default 0
         (off; earlier specs and their shard keys mean 0).
+    sweep_scenes : bool
+        With ``sweep_fraction``: the sweep cells also take the sweeps' scenes, the four kinds of
+        ``bench.grid`` (pan, zoom, fan, still) in equal shares (the kind drawn from its own stream,
+        ``derive_rng(seed, "sweep-kind", split, index)``), each with the sweeps' own parameters (the
+        ``SceneSpec`` defaults: a zoom at 5 Hz about the centre, 3 blades of 30 degrees and contrast
+        0.25 turning at 1500 rpm about the centre), on the training photographs at the drawn scales.
+        The mixture draws fans and zooms with random parameters and dead leaves for 40 % of its
+        cells; the sweeps' fan turns its blade tips at several thousand px/s. Default False (earlier
+        specs and their shard keys mean False).
     """
 
     kind: ClassVar[str] = "windows"
@@ -213,6 +222,7 @@ class WindowData:
     spike_floor_weight: float = 0.0
     train_parts: str = "all"
     sweep_fraction: float = 0.0
+    sweep_scenes: bool = False
 
     #: What ``train_parts`` may be.
     TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
@@ -230,6 +240,10 @@ class WindowData:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
                 raise InputError(f"{name}: expected a fraction in [0, 1], got {value!r}")
             put(self, name, float(value))
+        if not isinstance(self.sweep_scenes, bool):
+            raise InputError(f"sweep_scenes: expected true or false, got {self.sweep_scenes!r}")
+        if self.sweep_scenes and not self.sweep_fraction:
+            raise InputError("sweep_scenes: applies to the sweep cells; give sweep_fraction > 0 too")
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
@@ -281,6 +295,8 @@ class WindowData:
             key["scale_range"] = list(self.scale_range)
         if self.sweep_fraction:  # likewise
             key["sweep_fraction"] = self.sweep_fraction
+        if self.sweep_scenes:  # likewise
+            key["sweep_scenes"] = True
         return key
 
 

@@ -53,6 +53,8 @@ from neuspike.train.spec import KIND_WEIGHTS, SWEEP_POINTS, SWEEP_SPEED_PX_S, Tr
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
 
+#: The sweeps' scene kinds (``bench.grid.SCENE_KINDS``), drawn alike for ``sweep_scenes`` cells.
+SWEEP_SCENE_KINDS = ("pan", "zoom", "fan", "still")
 #: Effects every training cell declares (the sweeps' defaults).
 BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
 SENSOR_SIZE = (400, 250)
@@ -104,6 +106,9 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     size = tuple(data.val_view) if split == "val" and data.val_view is not None else (data.view, data.view)
     # a cell at one of the sweeps' points (only drawn when asked, so earlier specs draw what they drew)
     at_sweep = bool(data.sweep_fraction) and bool(rng.random() < data.sweep_fraction)
+    sweep_scene = at_sweep and data.sweep_scenes
+    if sweep_scene:  # the sweeps' four kinds alike, from a stream of its own (the cell's later draws follow the kind)
+        kind = SWEEP_SCENE_KINDS[int(derive_rng(spec.seed, "sweep-kind", split, int(index)).integers(len(SWEEP_SCENE_KINDS)))]
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
     speed = SWEEP_SPEED_PX_S if at_sweep else float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
@@ -124,12 +129,16 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         elif kind == "zoom":
             rate = float(rng.uniform(1.0, 20.0) * rng.choice([-1.0, 1.0]))
             scene = SceneSpec(kind="zoom", image=image, size=size, zoom_rate_hz=rate, focus=focus)
+            if sweep_scene:  # the sweeps' zoom (SceneSpec's defaults, as bench.grid builds it)
+                scene = SceneSpec(kind="zoom", image=image, size=size)
         elif kind == "fan":
             blades = int(rng.integers(2, 6))
             scene = SceneSpec(kind="fan", image=image, size=size, focus=focus, blades=blades,
                               rpm=float(rng.uniform(300, 3000) * rng.choice([-1.0, 1.0])),
                               blade_width_deg=float(rng.uniform(10, 300 / blades / 2)),
                               blade_contrast=float(rng.uniform(0.0, 2.0)))
+            if sweep_scene:  # the sweeps' fan
+                scene = SceneSpec(kind="fan", image=image, size=size)
         else:
             scene = SceneSpec(kind="still", image=image, size=size)
     if at_sweep:
@@ -145,6 +154,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
     if data.sweep_fraction:  # (the descriptions of earlier specs' cells stay as they were)
         info["at_sweep"] = at_sweep
+    if data.sweep_scenes:
+        info["sweep_scene"] = sweep_scene
     return scene, condition, sim_seed, info
 
 

@@ -125,6 +125,47 @@ def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_
             WindowData(sweep_fraction=bad)
 
 
+def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_rest_alone(tmp_path):
+    """sweep_scenes: the sweep cells take the four kinds of bench.grid alike, the zoom and fan with the
+    scenes bench.grid builds (compared field by field with its own SceneSpec), at one of the sweeps'
+    points; the other cells are those of the same spec without it."""
+    from dataclasses import fields
+
+    from bench import grid
+    from neuspike.train.spec import SWEEP_POINTS
+    from neuspike.train.windows import SWEEP_SCENE_KINDS
+
+    assert SWEEP_SCENE_KINDS == grid.SCENE_KINDS
+    base = tiny_spec(tmp_path, view=40, sweep_fraction=0.5)
+    spec = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True)
+    kinds = []
+    for i in range(120):
+        before, after = draw_cell(base, "train", i, tmp_path), draw_cell(spec, "train", i, tmp_path)
+        assert after[3]["sweep_scene"] == after[3]["at_sweep"] == before[3]["at_sweep"]
+        if not after[3]["at_sweep"]:
+            assert after[:3] == before[:3]  # scene, condition, simulation seed
+            continue
+        assert (after[1].light, after[1].motion, after[1].noise) in SWEEP_POINTS
+        scene = after[0]
+        kinds.append(scene.kind)
+        if scene.kind in ("zoom", "fan"):  # the sweeps' own scene at this view and image
+            ours = grid.scene_entry(f"{scene.kind}:{scene.image}", scene.size).spec
+            for f in fields(scene):
+                if f.name not in ("image",):
+                    assert getattr(scene, f.name) == getattr(ours, f.name), (scene.kind, f.name)
+        elif scene.kind == "pan":
+            assert np.hypot(*scene.velocity_px_s) == pytest.approx(1000.0 * 40 / 400)
+    assert set(kinds) == set(SWEEP_SCENE_KINDS) and "dead_leaves" not in kinds
+    assert all(10 <= kinds.count(k) <= 22 for k in SWEEP_SCENE_KINDS)  # about 60 / 4 each
+    assert WindowData(sweep_fraction=0.5, sweep_scenes=True).key(0)["sweep_scenes"] is True
+    assert "sweep_scenes" not in WindowData(sweep_fraction=0.5).key(0)
+    assert "sweep_scene" not in draw_cell(base, "train", 0, tmp_path)[3]
+    with pytest.raises(InputError, match="sweep_scenes.*sweep_fraction"):
+        WindowData(sweep_scenes=True)
+    with pytest.raises(InputError, match="sweep_scenes"):
+        WindowData(sweep_fraction=0.5, sweep_scenes="yes")
+
+
 def test_saved_windows_load_back_identically(tmp_path):
     spec = tiny_spec(tmp_path)
     s = simulate_cell(spec, "val", 0, tmp_path)
