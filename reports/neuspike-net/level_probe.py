@@ -1,0 +1,83 @@
+"""Which level of the motion path costs the fusion its SSIM at the sweeps' high noise (a probe, training photographs).
+
+    python reports/neuspike-net/level_probe.py [FOLDER] [--noise high] [--threads 1]
+
+Simulates the full sweeps' noise point (L = 1/4, S = 128, the given noise level) on the four training
+photographs of ``fullsize_check.py`` through all four scene kinds (16 windows, seed 0: the grid's own
+cells), and scores the fusion (float32, the method's counted mean level) with its motion gate's four
+gains as trained and with one level's gain scaled by 0 or 0.5 at a time (x_m^3 .. x_m^0; 0 everywhere
+is the spike-only network inside the fusion), beside the folder's spike-only file. Prints mean PSNR /
+SSIM per setting and the SSIM by scene kind, so a reader sees where the events cost structure.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import torch
+
+from bench import grid as grids
+from neuspike.conditions import Condition
+from neuspike.methods import create
+from neuspike.metrics import ssim
+from neuspike.simulation.cell import simulate_sample
+from neuspike.simulation.recording import SensorConfig
+
+from fullsize_check import PHOTOS, trained_design  # noqa: E402  (run from this folder's parent or with it on the path)
+
+KINDS = ("pan", "zoom", "fan", "still")
+LEVELS = ("x_m^3", "x_m^2", "x_m^1", "x_m^0")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
+    p.add_argument("--noise", default="high", help="the noise level (default high)")
+    p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    cells = [(kind, photo) for kind in KINDS for photo in PHOTOS]
+    cond = Condition(light=1 / 4, motion=128, noise=args.noise, effects=grids.DEFAULT_EFFECTS)
+    samples = [simulate_sample(grids.scene_entry(f"{kind}:{photo}", (400, 250)).spec, cond, sensor=SensorConfig(),
+                               seed=0, modalities=("spikes", "events")) for kind, photo in cells]
+    fusion = create("neuspike-net", weights_dir=args.folder, precision="float32",
+                    **trained_design(args.folder, "neuspike-net"))
+    spike = create("neuspike-net-spike", weights_dir=args.folder, precision="float32",
+                   **trained_design(args.folder, "neuspike-net-spike"))
+
+    def score(method) -> tuple[np.ndarray, np.ndarray]:
+        psnr, structure = [], []
+        for sample in samples:
+            y, truth = method.reconstruct(sample), sample.ground_truth
+            psnr.append(10 * np.log10(1.0 / max(float(np.mean((y - truth) ** 2)), 1e-12)))
+            structure.append(ssim(y, truth, data_range=1.0))
+        return np.array(psnr), np.array(structure)
+
+    def line(label: str, psnr: np.ndarray, structure: np.ndarray) -> None:
+        kinds = " / ".join(f"{structure[i * len(PHOTOS):(i + 1) * len(PHOTOS)].mean():.4f}" for i in range(len(KINDS)))
+        print(f"{label:34s} {psnr.mean():6.2f} / {structure.mean():.4f}   SSIM {' / '.join(KINDS)}: {kinds}")
+
+    print(f"noise {args.noise}, L = 1/4, S = 128, {len(samples)} windows of training photographs")
+    line("spike-only file", *score(spike))
+    gate = fusion.module.motion_gate
+    trained = gate.forward
+    settings = [("as trained", np.ones(4))]
+    for level in range(4):
+        for factor in (0.0, 0.5):
+            scale = np.ones(4)
+            scale[level] = factor
+            settings.append((f"{LEVELS[level]} x {factor:g}", scale))
+    settings += [("every level x 0.5", np.full(4, 0.5)), ("every level x 0", np.zeros(4))]
+    try:
+        for label, scale in settings:
+            factors = torch.tensor(scale, dtype=torch.float32)
+            gate.forward = lambda s, e, *rest, f=factors: trained(s, e, *rest) * f
+            line(f"fusion, {label}", *score(fusion))
+    finally:
+        gate.forward = trained
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
