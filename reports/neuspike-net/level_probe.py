@@ -24,7 +24,7 @@ from neuspike.metrics import ssim
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
-from fullsize_check import PHOTOS, trained_design  # noqa: E402  (run from this folder's parent or with it on the path)
+from fullsize_check import PHOTOS, trained_design  # noqa: E402  (beside this script: Python puts its folder on the path)
 
 KINDS = ("pan", "zoom", "fan", "still")
 LEVELS = ("x_m^3", "x_m^2", "x_m^1", "x_m^0")
