@@ -21,14 +21,14 @@ from neuspike.methods.precision import PRECISIONS
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
                "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction",
-               "sweep_scenes")
+               "sweep_scenes", "sweep_scene_weights")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
               "edge_ssim_weight", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction", "sweep_scenes",
-              "size", "view",
+              "sweep_scene_weights", "size", "view",
               "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
@@ -153,6 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--sweep-scenes", action="store_const", const=True, default=None,
                    help="single windows, with --sweep-fraction: the sweep cells also take the sweeps' scenes (pan, "
                         "zoom, fan, still alike, with the sweeps' zoom rate and fan)")
+    d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
+                   help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
+                        "(e.g. 1,1,4,1; default equal)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -183,17 +186,22 @@ def _list(text: str) -> tuple[str, ...]:
     return tuple(v.strip() for v in text.split(",") if v.strip())
 
 
-def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
-    """``"LOW,HIGH"`` -> (low, high); a clear error naming ``flag`` otherwise."""
+def _numbers(text: str, flag: str, form: str, count: int) -> tuple[float, ...]:
+    """``"A,B,..."`` -> ``count`` floats; a clear error naming ``flag`` and the expected ``form`` otherwise."""
     from neuspike.errors import InputError
 
     try:
-        pair = tuple(float(v) for v in _list(text))
+        values = tuple(float(v) for v in _list(text))
     except ValueError:
-        pair = ()
-    if len(pair) != 2:
-        raise InputError(f"{flag}: expected LOW,HIGH{unit}, got {text!r}")
-    return pair
+        values = ()
+    if len(values) != count:
+        raise InputError(f"{flag}: expected {form}, got {text!r}")
+    return values
+
+
+def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
+    """``"LOW,HIGH"`` -> (low, high); a clear error naming ``flag`` otherwise."""
+    return _numbers(text, flag, f"LOW,HIGH{unit}", 2)
 
 
 def spec_from_args(args: argparse.Namespace):
@@ -254,6 +262,9 @@ def spec_from_args(args: argparse.Namespace):
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
+    if args.sweep_scene_weights is not None:
+        kw["sweep_scene_weights"] = _numbers(args.sweep_scene_weights, "--sweep-scene-weights",
+                                             "PAN,ZOOM,FAN,STILL", 4)
     for name, unit in (("speed_range", " in px/s"), ("scale_range", "")):
         if getattr(args, name) is not None:
             kw[name] = _pair(getattr(args, name), f"--{name.replace('_', '-')}", unit)

@@ -196,6 +196,10 @@ class WindowData:
         The mixture draws fans and zooms with random parameters and dead leaves for 40 % of its
         cells; the sweeps' fan turns its blade tips at several thousand px/s. Default False (earlier
         specs and their shard keys mean False).
+    sweep_scene_weights : (pan, zoom, fan, still) or None
+        With ``sweep_scenes``: the relative shares of the four kinds among the sweep cells (drawn from
+        the same stream), e.g. ``(1, 1, 4, 1)`` for four fans to each pan. Default None: equal shares
+        (the draws, and shard keys, of specs without the field).
     """
 
     kind: ClassVar[str] = "windows"
@@ -223,6 +227,7 @@ class WindowData:
     train_parts: str = "all"
     sweep_fraction: float = 0.0
     sweep_scenes: bool = False
+    sweep_scene_weights: tuple[float, float, float, float] | None = None
 
     #: What ``train_parts`` may be.
     TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
@@ -244,6 +249,16 @@ class WindowData:
             raise InputError(f"sweep_scenes: expected true or false, got {self.sweep_scenes!r}")
         if self.sweep_scenes and not self.sweep_fraction:
             raise InputError("sweep_scenes: applies to the sweep cells; give sweep_fraction > 0 too")
+        if self.sweep_scene_weights is not None:
+            w = self.sweep_scene_weights
+            if isinstance(w, (str, bytes)) or not hasattr(w, "__len__") or len(w) != 4 or not all(
+                    not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
+                    for v in w) or not sum(w) > 0:
+                raise InputError("sweep_scene_weights: expected four weights >= 0 (pan, zoom, fan, still), "
+                                 f"not all zero, got {w!r}")
+            if not self.sweep_scenes:
+                raise InputError("sweep_scene_weights: applies to the sweep scenes; give sweep_scenes true too")
+            put(self, "sweep_scene_weights", tuple(float(v) for v in w))
         if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
             raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
         put(self, "offset_weight", float(self.offset_weight))
@@ -297,6 +312,8 @@ class WindowData:
             key["sweep_fraction"] = self.sweep_fraction
         if self.sweep_scenes:  # likewise
             key["sweep_scenes"] = True
+        if self.sweep_scene_weights is not None:  # likewise
+            key["sweep_scene_weights"] = list(self.sweep_scene_weights)
         return key
 
 

@@ -108,7 +108,12 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     at_sweep = bool(data.sweep_fraction) and bool(rng.random() < data.sweep_fraction)
     sweep_scene = at_sweep and data.sweep_scenes
     if sweep_scene:  # the sweeps' four kinds alike, from a stream of its own (the cell's later draws follow the kind)
-        kind = SWEEP_SCENE_KINDS[int(derive_rng(spec.seed, "sweep-kind", split, int(index)).integers(len(SWEEP_SCENE_KINDS)))]
+        kind_rng = derive_rng(spec.seed, "sweep-kind", split, int(index))
+        if data.sweep_scene_weights is None:  # equal shares (the draw of specs without the weights)
+            kind = SWEEP_SCENE_KINDS[int(kind_rng.integers(len(SWEEP_SCENE_KINDS)))]
+        else:
+            w = np.asarray(data.sweep_scene_weights, dtype=float)
+            kind = SWEEP_SCENE_KINDS[int(kind_rng.choice(len(SWEEP_SCENE_KINDS), p=w / w.sum()))]
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
     speed = SWEEP_SPEED_PX_S if at_sweep else float(np.exp(rng.uniform(np.log(lo), np.log(hi))))

@@ -166,6 +166,44 @@ def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_r
         WindowData(sweep_fraction=0.5, sweep_scenes="yes")
 
 
+def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
+    """sweep_scene_weights: the sweep cells' kinds in the given shares (all fans with (0, 0, 1, 0); about
+    4 / 7 fans with (1, 1, 4, 1)), each at one of the sweeps' points; the other cells unchanged."""
+    from neuspike.train.__main__ import build_parser, spec_from_args
+    from neuspike.train.spec import SWEEP_POINTS
+
+    equal = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True)
+    fans = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=[0, 0, 1, 0])
+    heavy = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=(1, 1, 4, 1))
+    assert heavy.data.sweep_scene_weights == (1.0, 1.0, 4.0, 1.0)
+    counts = {"fan": 0, "other": 0}
+    for i in range(200):
+        before, only, most = (draw_cell(s, "train", i, tmp_path) for s in (equal, fans, heavy))
+        assert before[3]["at_sweep"] == only[3]["at_sweep"] == most[3]["at_sweep"]
+        if not before[3]["at_sweep"]:
+            assert only[:3] == before[:3] == most[:3]
+            continue
+        assert only[0].kind == "fan"
+        assert (only[1].light, only[1].motion, only[1].noise) in SWEEP_POINTS
+        counts["fan" if most[0].kind == "fan" else "other"] += 1
+    n = counts["fan"] + counts["other"]
+    assert n > 60 and abs(counts["fan"] / n - 4 / 7) < 4 * (4 / 7 * 3 / 7 / n) ** 0.5
+    assert heavy.data.key(0)["sweep_scene_weights"] == [1.0, 1.0, 4.0, 1.0]
+    assert "sweep_scene_weights" not in equal.data.key(0)
+    for bad in ((1, 1, 1), (0, 0, 0, 0), (1, -1, 1, 1), (1, 1, float("nan"), 1), "1,1,4,1", (True, 1, 1, 1)):
+        with pytest.raises(InputError, match="sweep_scene_weights"):
+            WindowData(sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=bad)
+    with pytest.raises(InputError, match="sweep_scene_weights.*sweep_scenes"):
+        WindowData(sweep_fraction=0.5, sweep_scene_weights=(1, 1, 4, 1))
+    args = build_parser().parse_args(["neuspike-net", "--sweep-fraction", "0.5", "--sweep-scenes",
+                                      "--sweep-scene-weights", "1,1,4,1", "--out", str(tmp_path / "r")])
+    assert spec_from_args(args).data.sweep_scene_weights == (1.0, 1.0, 4.0, 1.0)
+    args = build_parser().parse_args(["neuspike-net", "--sweep-fraction", "0.5", "--sweep-scenes",
+                                      "--sweep-scene-weights", "1,4", "--out", str(tmp_path / "r")])
+    with pytest.raises(InputError, match="--sweep-scene-weights: expected PAN,ZOOM,FAN,STILL"):
+        spec_from_args(args)
+
+
 def test_saved_windows_load_back_identically(tmp_path):
     spec = tiny_spec(tmp_path)
     s = simulate_cell(spec, "val", 0, tmp_path)
