@@ -80,6 +80,8 @@ COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_pe
 READ_ONLY = "read-only"
 SINGLE_FRAME = "tfp (single-frame calls)"
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "reports" / "video" / "bench"
+#: Where ``--full`` writes unless told (so the full run never overwrites the default run's report).
+DEFAULT_OUT_FULL = DEFAULT_OUT.parent / "bench-full"
 
 
 @dataclass(frozen=True)
@@ -457,7 +459,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recurrent event networks: 'key' (default) steps the events after the last full window so "
                    "a frame shows its own instant; 'window' shows the last full window (at most one window "
                    "earlier), one network step fewer per frame, at the price of frames that lag on fast motion")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default: {DEFAULT_OUT})")
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"output folder (default: {DEFAULT_OUT}; with --full: {DEFAULT_OUT_FULL})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
@@ -465,6 +468,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.out is None:
+        args.out = DEFAULT_OUT_FULL if args.full else DEFAULT_OUT
     try:
         if args.plot_only:
             plot(args.out / "results.csv", args.out / "accuracy_vs_speed.png")

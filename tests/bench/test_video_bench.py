@@ -150,3 +150,21 @@ def test_read_out_window_reaches_the_event_networks_only_and_costs_fewer_steps(b
     assert window.loc["tfp", "mean_psnr_db"] == key.loc["tfp", "mean_psnr_db"]
     readme = (tmp_path / "w" / "README.md").read_text()
     assert "--read-out window`" in readme and "frames read out at the last full event window" in readme
+
+
+def test_full_writes_its_own_report_folder_unless_told(tmp_path, monkeypatch):
+    """``--full`` without ``--out`` goes to bench-full, the default run to bench: neither overwrites the other."""
+    import shutil
+    from pathlib import Path
+
+    quick, full = tmp_path / "bench", tmp_path / "bench-full"
+    for folder in (quick, full):
+        folder.mkdir()
+        shutil.copy(Path(vb.__file__).resolve().parents[1] / "reports" / "video" / "bench-full" / "results.csv",
+                    folder / "results.csv")
+    monkeypatch.setattr(vb, "DEFAULT_OUT", quick)
+    monkeypatch.setattr(vb, "DEFAULT_OUT_FULL", full)
+    assert vb.main(["--full", "--plot-only"]) == 0
+    assert (full / "accuracy_vs_speed.png").exists() and not (quick / "accuracy_vs_speed.png").exists()
+    assert vb.main(["--plot-only"]) == 0
+    assert (quick / "accuracy_vs_speed.png").exists()
