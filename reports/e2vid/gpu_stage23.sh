@@ -40,7 +40,11 @@ cp neuspike/trained/e2vid.safetensors runs/e2vid-stage23-start.safetensors
 cp neuspike/trained/e2vid.safetensors runs/e2vid-stage24-start.safetensors
 python -m neuspike.train e2vid --spec "$S23" --device $DEV --workers $WORKERS --threads $THREADS --simulate-only --quiet || exit 1
 echo "shard simulated after $(( $(date +%s) - T0 )) s"
-python -m neuspike.train e2vid --spec "$S23" --device $DEV --threads $THREADS --snapshot-every $EVERY23 --quiet || exit 1
+LEFT=$(( DEADLINE_S - ($(date +%s) - T0) - 60 ))   # 60 s: the last save and packing
+MINUTES=$(python -c "print(max(0.5, $LEFT / 60))")
+echo "stage 23: training for at most $MINUTES min"
+python -m neuspike.train e2vid --spec "$S23" --device $DEV --threads $THREADS --snapshot-every $EVERY23 \
+    --max-minutes "$MINUTES" --quiet || exit 1
 echo "stage 23 trained after $(( $(date +%s) - T0 )) s"
 LEFT=$(( DEADLINE_S - ($(date +%s) - T0) - 60 ))   # 60 s: loading the shard, the last save, packing
 if [ "$LEFT" -gt 30 ]; then
