@@ -125,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="with the fusion (the default --method): also score each folder's spike-only file and print "
                         "the fusion's margin over it at every point (issue 20 asks the fusion to be the better one)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    p.add_argument("--digits", type=int, default=2,
+                   help="decimals of each folder's mean PSNR (default 2; a rule's 'not lower' may need more)")
     args = p.parse_args(argv)
     if args.spike_beside and args.method != "neuspike-net":
         p.error("--spike-beside compares the fusion with its spike-only file: give --method neuspike-net")
@@ -161,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         method = create(args.method, weights_dir=folder, precision="float32", level=args.level,
                         **trained_design(folder, args.method))
         raw, aligned, level, structure = _score(method, samples)
-        print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.2f}, "
+        print(f"{folder or 'shipped'}: {len(samples)} windows, PSNR {np.mean(raw):.{args.digits}f}, "
               f"affine-aligned {np.mean(aligned):.2f}, SSIM {np.mean(structure):.4f}")
         margins, gaps, ssim_margins = [], [], []
         for key, pick in groups.items():  # each point: raw / aligned, margin to the references
