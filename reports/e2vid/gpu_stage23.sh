@@ -9,6 +9,7 @@
 # held-out harness on the CPU (reports/e2vid/candidates/harness.sh).
 #     bash reports/e2vid/gpu_stage23.sh OUT [DEADLINE_S]     (DEADLINE_S: seconds from now to be done)
 #     DRY=1 bash reports/e2vid/gpu_stage23.sh OUT            (the same flow on the CPU on tiny specs)
+#     SKIP23=1 bash reports/e2vid/gpu_stage23.sh OUT [DEADLINE_S]   (stage 24 alone: stage 23 ran on a CPU)
 # Unpack on the CPU with: cat OUT/snapshots.tar.part* | tar -xf -
 # Every phase runs under `timeout` inside the deadline and writes one line to OUT/progress.txt, so a
 # phase that stalls still leaves the script time to pack what exists (a first try on an H200 gave no
@@ -50,11 +51,15 @@ note "simulating the shard with $WORKERS processes"
 timeout -k 10 $(left 240) python -m neuspike.train e2vid --spec "$S23" --device $DEV --workers $WORKERS --threads $THREADS \
     --simulate-only --quiet || { note "simulation failed or ran out of time (rc $?)"; exit 1; }
 note "shard simulated"
-MINUTES=$(python -c "print(max(0.5, $(left 90) / 60))")   # 90 s: loading the shard, the last save, packing
-note "stage 23: training for at most $MINUTES min"
-timeout -k 10 $(left 30) python -m neuspike.train e2vid --spec "$S23" --device $DEV --threads $THREADS \
-    --snapshot-every $EVERY23 --max-minutes "$MINUTES" --quiet
-note "stage 23 ended (rc $?)"
+if [ "${SKIP23:-0}" = 1 ]; then
+  note "stage 23 skipped (SKIP23=1)"; R23=/nonexistent
+else
+  MINUTES=$(python -c "print(max(0.5, $(left 90) / 60))")   # 90 s: loading the shard, the last save, packing
+  note "stage 23: training for at most $MINUTES min"
+  timeout -k 10 $(left 30) python -m neuspike.train e2vid --spec "$S23" --device $DEV --threads $THREADS \
+      --snapshot-every $EVERY23 --max-minutes "$MINUTES" --quiet
+  note "stage 23 ended (rc $?)"
+fi
 LEFT=$(left 90)
 if [ "$LEFT" -gt 30 ]; then
   MINUTES=$(python -c "print($LEFT / 60)")

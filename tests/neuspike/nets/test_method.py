@@ -306,7 +306,7 @@ def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_
         NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi"})
     with pytest.raises(InputError, match="support-count"):
         NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support", "key_estimates": "isi-sequence"})
-    for name in ("neuspike-net", "neuspike-net-spike"):  # the shipped weights (stage 25) use them
+    for name in ("neuspike-net", "neuspike-net-spike"):  # the shipped weights (stages 25 and 38) use them
         assert create(name).params["key_estimates"] == "isi-sequence"
         with pytest.raises(FormatError, match="key_estimates"):
             create(name, key_estimates="none")
