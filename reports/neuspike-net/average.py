@@ -3,8 +3,8 @@
     python reports/neuspike-net/average.py DIR_A DIR_B WEIGHT OUT_DIR [--name neuspike-net]
 
 Writes OUT_DIR/NAME.safetensors = (1 - WEIGHT) x A + WEIGHT x B, tensor by tensor, computed in float32
-and stored in bfloat16, with a card: B's card (its model parameters, which both files must share), the
-two sources' sha256 and the weight. Both files must hold the same tensors with the same shapes and
+and stored in bfloat16, with a card: B's card (its model parameters, which both files must share) without
+B's validation scores, the two sources' sha256 and the weight. Both files must hold the same tensors with the same shapes and
 cards naming the same model; anything else is refused. The spike-only file is not touched.
 """
 
@@ -24,14 +24,15 @@ def average(dir_a: Path, dir_b: Path, weight: float, out_dir: Path, name: str = 
     if not 0.0 <= weight <= 1.0:
         raise InputError(f"weight: expected a number in [0, 1], got {weight}")
     paths = [Path(d) / f"{name}.safetensors" for d in (dir_a, dir_b)]
-    cards, states = [], []
+    cards, states, digests = [], [], []
     for p in paths:
         if not p.is_file():
             raise InputError(f"{p}: no such weights file")
         card = read_card(p)
         if card is None:
             raise InputError(f"{p}: no JSON card beside it")
-        check_card(p, file_sha256(p))
+        digests.append(file_sha256(p))
+        check_card(p, digests[-1])
         cards.append(card)
         states.append(load_safetensors(p))
     if cards[0]["model"] != cards[1]["model"]:
@@ -42,8 +43,9 @@ def average(dir_a: Path, dir_b: Path, weight: float, out_dir: Path, name: str = 
     mixed = {k: ((1.0 - weight) * a[k].float() + weight * b[k].float()) if a[k].is_floating_point() else b[k]
              for k in a}
     card = dict(cards[1])
-    card["average"] = {"weight_of_b": weight, "a": {"path": str(paths[0]), "sha256": file_sha256(paths[0])},
-                       "b": {"path": str(paths[1]), "sha256": file_sha256(paths[1])},
+    card.pop("validation", None)  # B's scores; the average itself was not validated
+    card["average"] = {"weight_of_b": weight, "a": {"path": str(paths[0]), "sha256": digests[0]},
+                       "b": {"path": str(paths[1]), "sha256": digests[1]},
                        "formula": "(1 - weight_of_b) * a + weight_of_b * b, in float32, stored in bfloat16"}
     return save_safetensors(mixed, Path(out_dir) / f"{name}.safetensors", card=card, dtype=torch.bfloat16)
 
