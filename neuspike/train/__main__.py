@@ -20,15 +20,15 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction",
-               "sweep_scenes", "sweep_scene_weights")
+               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
+               "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
-              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "train_parts", "sweep_fraction", "sweep_scenes",
-              "sweep_scene_weights", "size", "view",
+              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "train_parts",
+              "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "size", "view",
               "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
@@ -144,6 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--spike-floor-weight", type=float, metavar="W",
                    help="single windows, fusion networks: add W x the batch mean of max(0, crop loss of the fusion - "
                         "crop loss of its own spike-only forward) to the fusion steps' loss (default 0)")
+    d.add_argument("--spike-floor-noise-weights", metavar="LEVEL=W,...",
+                   help="single windows, fusion networks: the spike floor's weight for the windows of the named "
+                        "noise levels (none, small, medium, high), in place of --spike-floor-weight, which the "
+                        "others keep; e.g. medium=8,high=16")
     d.add_argument("--train-parts", choices=("all", "motion"),
                    help="single windows, fusion networks with --init-from: 'motion' trains the motion path only and "
                         "holds the rest (so the spike-only variant stays as given; default all)")
@@ -197,6 +201,22 @@ def _numbers(text: str, flag: str, form: str, count: int) -> tuple[float, ...]:
     if len(values) != count:
         raise InputError(f"{flag}: expected {form}, got {text!r}")
     return values
+
+
+def _level_weights(text: str, flag: str) -> dict[str, float]:
+    """``"LEVEL=W,..."`` -> {level: weight}; a clear error naming ``flag`` otherwise (levels checked by the spec)."""
+    from neuspike.errors import InputError
+
+    out: dict[str, float] = {}
+    for item in _list(text):
+        level, eq, value = item.partition("=")
+        try:
+            out[level.strip()] = float(value)
+        except ValueError:
+            eq = ""
+        if not eq or not level.strip():
+            raise InputError(f"{flag}: expected LEVEL=WEIGHT,... (e.g. medium=8,high=16), got {text!r}")
+    return out
 
 
 def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
@@ -262,6 +282,8 @@ def spec_from_args(args: argparse.Namespace):
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
+    if args.spike_floor_noise_weights is not None:
+        kw["spike_floor_noise_weights"] = _level_weights(args.spike_floor_noise_weights, "--spike-floor-noise-weights")
     if args.sweep_scene_weights is not None:
         kw["sweep_scene_weights"] = _numbers(args.sweep_scene_weights, "--sweep-scene-weights",
                                              "PAN,ZOOM,FAN,STILL", 4)

@@ -172,6 +172,12 @@ class WindowData:
         fusion is pushed to be no worse than its own spike-only self crop by crop; where the events
         only hurt (heavy noise) the motion gate can shut them out, since ``F(t, 0) = t``. Default 0
         (off; earlier specs mean 0).
+    spike_floor_noise_weights : {noise level: weight} or None
+        Fusion networks only: the spike floor's weight for the crops of the named sensor-noise levels
+        (each training window's own level), in place of ``spike_floor_weight``, which the levels not
+        named keep; the term is then the batch mean of ``w_i * relu(l_fusion,i - l_spike,i)``. The
+        floor can then weigh heavily where the events are noisy without taxing the clean crops, where
+        the events carry the gain. Default None (every crop at ``spike_floor_weight``).
     train_parts : ``"all"`` or ``"motion"``
         ``"motion"`` (fusion networks, with ``init_from``): only the motion path learns (the motion
         encoder, the fusion modules, the motion gate, the event transformer); the texture path, the
@@ -224,6 +230,7 @@ class WindowData:
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
     spike_floor_weight: float = 0.0
+    spike_floor_noise_weights: dict[str, float] | None = None
     train_parts: str = "all"
     sweep_fraction: float = 0.0
     sweep_scenes: bool = False
@@ -264,6 +271,17 @@ class WindowData:
         put(self, "offset_weight", float(self.offset_weight))
         for name in ("support_weight", "edge_ssim_weight", "spike_floor_weight"):
             put(self, name, _loss_weight(name, getattr(self, name)))
+        if self.spike_floor_noise_weights is not None:
+            w = self.spike_floor_noise_weights
+            if not isinstance(w, dict) or not w:
+                raise InputError("spike_floor_noise_weights: expected {noise level: weight} with at least one "
+                                 f"level, got {w!r}")
+            bad = sorted(set(w) - set(NOISE_LEVELS))
+            if bad:
+                raise InputError(f"spike_floor_noise_weights: unknown noise levels {bad}; choose from "
+                                 f"{', '.join(NOISE_LEVELS)}")
+            put(self, "spike_floor_noise_weights",
+                {k: _loss_weight(f"spike_floor_noise_weights[{k!r}]", w[k]) for k in NOISE_LEVELS if k in w})
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

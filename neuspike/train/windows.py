@@ -299,9 +299,10 @@ class WindowTask:
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
       exported as ``<name>-spike``.
-    * **spike floor**: with ``spike_floor_weight``, each fusion step also runs the spike-only forward
-      of the same crops without gradient and adds the weight times the batch mean of
-      ``relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss.
+    * **spike floor**: with ``spike_floor_weight`` (or ``spike_floor_noise_weights``), each fusion step
+      also runs the spike-only forward of the same crops without gradient and adds the batch mean of
+      ``w_i * relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss and ``w_i``
+      the weight of crop i's noise level (``spike_floor_weight`` for the levels not named).
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -321,6 +322,8 @@ class WindowTask:
         self.fusion = method.params.get("spike_only") is False
         self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
         fusion_only = [f"spike_floor_weight {self.data.spike_floor_weight}"] if self.data.spike_floor_weight else []
+        if self.data.spike_floor_noise_weights:
+            fusion_only.append(f"spike_floor_noise_weights {self.data.spike_floor_noise_weights}")
         fusion_only += [f"train_parts {self.data.train_parts!r}"] if self.data.train_parts != "all" else []
         if fusion_only and not self.fusion:
             raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
@@ -361,8 +364,8 @@ class WindowTask:
     def encode(self, sample: Sample) -> tuple[torch.Tensor, ...]:
         return tuple(self.method.encode(sample)[0])
 
-    def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
-        """The inputs and targets of ``step`` (deterministic from the seed and the step), on the CPU."""
+    def batch_indices(self, step: int) -> list[int]:
+        """The training windows of ``step``, in batch order (deterministic from the seed and the step)."""
         spec = self.spec
         n = len(self.train_paths)
         first = step * spec.batch
@@ -371,6 +374,36 @@ class WindowTask:
             epoch, pos = divmod(j, n)
             perm = derive_rng(spec.seed, "order", epoch).permutation(n)
             idx.append(int(perm[pos]))
+        return idx
+
+    def noise_levels(self, step: int) -> list[str]:
+        """The sensor-noise level of each window of ``step``'s batch, in batch order (read from the shard)."""
+        cache = self.__dict__.setdefault("_noise", {})
+        levels = []
+        for i in self.batch_indices(step):
+            if i not in cache:
+                path = self.train_paths[i]
+                try:
+                    with np.load(path) as z:
+                        cache[i] = json.loads(str(z["cell"]))["noise"]
+                except (OSError, KeyError, ValueError) as exc:
+                    raise FormatError(f"{path}: no noise level in the window's cell ({exc})") from exc
+            levels.append(cache[i])
+        return levels
+
+    def floor_weights(self, step: int) -> float | torch.Tensor | None:
+        """The spike floor's weight on ``step``: one number for every crop (``spike_floor_weight``), each
+        crop's own ((B,), on the device; with ``spike_floor_noise_weights``), or None where it is 0."""
+        data = self.data
+        if data.spike_floor_noise_weights is None:
+            return data.spike_floor_weight or None
+        w = [data.spike_floor_noise_weights.get(level, data.spike_floor_weight) for level in self.noise_levels(step)]
+        return torch.tensor(w, dtype=torch.float32, device=self.device) if any(w) else None
+
+    def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """The inputs and targets of ``step`` (deterministic from the seed and the step), on the CPU."""
+        spec = self.spec
+        idx = self.batch_indices(step)
         rng = derive_rng(spec.seed, "augment", step)
         inputs, targets = [], []
         for i in idx:
@@ -464,13 +497,17 @@ class WindowTask:
         with autocast():
             pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
         loss, parts = self.loss(pred, target)
-        if self.data.spike_floor_weight and variant == "fusion":
+        weights = self.floor_weights(step) if variant == "fusion" else None
+        if weights is not None:
             with torch.no_grad(), autocast():
                 floor = self.forward(inputs, "spike")
             image = pred[0] if isinstance(pred, tuple) else pred
-            excess = (self.crop_losses(image, target) - self.crop_losses(floor, target)).clamp_min(0.0).mean()
-            loss = loss + self.data.spike_floor_weight * excess
-            parts["spike_floor"] = excess.item()
+            excess = (self.crop_losses(image, target) - self.crop_losses(floor, target)).clamp_min(0.0)
+            if isinstance(weights, torch.Tensor):
+                loss = loss + (weights * excess).mean()
+            else:  # (one weight: the sum as every spec before the noise weights computed it)
+                loss = loss + weights * excess.mean()
+            parts["spike_floor"] = excess.mean().item()
         return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
 
     @torch.no_grad()

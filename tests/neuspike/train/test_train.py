@@ -494,12 +494,16 @@ def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_va
     plain.train_paths = trainer.task.train_paths
     task = trainer.task
     step = _fusion_step(task)
-    with torch.no_grad():
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
+        for p in trainer.module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
         loss, parts = task.step_loss(step, trainer.autocast)
         base, _ = plain.step_loss(step, trainer.autocast)
         inputs, target = task.batch(step)
         excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
                   - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0).mean()
+    assert float(excess) > 0  # (the term is tested where it is not 0)
     assert parts["spike_floor"] == pytest.approx(float(excess), rel=1e-5, abs=1e-7)
     assert float(loss - base) == pytest.approx(2.0 * float(excess), rel=1e-4, abs=1e-7)
     spike_step = next(k for k in range(100) if task.step_variant(k) == "spike")
@@ -510,6 +514,56 @@ def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_va
         shut, shut_parts = task.step_loss(step, trainer.autocast)
         assert torch.allclose(task.forward(inputs, "fusion"), task.forward(inputs, "spike"), atol=1e-6)
     assert shut_parts["spike_floor"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tmp_path, one_torch_thread):
+    """spike_floor_noise_weights gives the crops of the named noise levels their own floor weight (the
+    others keep spike_floor_weight): the term is mean_i(w_i * relu(l_fusion,i - l_spike,i)), each crop's
+    level read from its window as the simulator recorded it. Bad levels and weights are refused by name,
+    the spec round-trips through JSON and the shard key does not change."""
+    from neuspike.methods import create
+    from neuspike.train.__main__ import _level_weights
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    for bad in ({"loud": 1.0}, {"high": -1.0}, {"high": float("nan")}, {}, [("high", 1.0)]):
+        with pytest.raises(InputError, match="spike_floor_noise_weights"):
+            WindowData(spike_floor_noise_weights=bad)
+    with pytest.raises(InputError, match="spike_floor_noise_weights.*fusion networks only"):
+        WindowTask(TrainSpec(data=WindowData(spike_floor_noise_weights={"high": 1.0})), create("neuspike-net-spike"))
+    with pytest.raises(InputError, match="--spike-floor-noise-weights"):
+        _level_weights("high:8", "--spike-floor-noise-weights")
+    assert _level_weights("high=16, medium=8", "--f") == {"high": 16.0, "medium": 8.0}
+    assert WindowData(spike_floor_noise_weights={"high": 3}).key(0) == WindowData().key(0)
+    spec = tiny_spec(tmp_path, batch=4, train_items=6, noise_levels=("none", "high"), spike_floor_weight=0.5,
+                     spike_floor_noise_weights={"high": 4.0}, params={"motion_gate": "stats"})
+    assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task = trainer.task
+    plain = WindowTask(tiny_spec(tmp_path, batch=4, train_items=6, noise_levels=("none", "high"),
+                                 params={"motion_gate": "stats"}), trainer.method)
+    plain.train_paths = task.train_paths
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
+        for p in trainer.module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    seen, positive = set(), set()
+    for step in [k for k in range(40) if task.step_variant(k) == "fusion"][:4]:
+        levels = [load_sample(task.train_paths[i]).meta["cell"]["noise"] for i in task.batch_indices(step)]
+        assert task.noise_levels(step) == levels
+        seen.update(levels)
+        weights = torch.tensor([4.0 if level == "high" else 0.5 for level in levels])
+        with torch.no_grad():
+            loss, parts = task.step_loss(step, trainer.autocast)
+            base, _ = plain.step_loss(step, trainer.autocast)
+            inputs, target = task.batch(step)
+            excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
+                      - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0)
+        assert float(loss - base) == pytest.approx(float((weights * excess).mean()), rel=1e-4, abs=1e-7)
+        assert parts["spike_floor"] == pytest.approx(float(excess.mean()), rel=1e-5, abs=1e-7)
+        positive.update(level for level, e in zip(levels, excess.tolist()) if e > 0)
+    assert seen == positive == {"none", "high"}  # both weights were used, on crops with an excess
 
 
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
