@@ -136,6 +136,11 @@ class LoadWatch:
     starts late in a short run may be missed; the readings are recorded), or when other processes
     were running at the start (:func:`~neuspike.utils.resources.others_busy_cpus`, which sees a job
     the average has not caught up with yet).
+
+    The same lag works the other way: a job that ended just before the run (the previous benchmark of
+    a series) leaves the average high for a minute while nothing else runs. So the reading before the
+    start counts as other jobs' load only where something is running at the start (or where the
+    system does not say); the readings during the run count either way, and every reading is recorded.
     """
 
     def __init__(self, own_threads: int, *, side_by_side: bool = False) -> None:
@@ -152,10 +157,12 @@ class LoadWatch:
             self.readings.append(value)
 
     def other_load(self) -> float | None:
-        """The largest load of other jobs seen: before the run, or beyond this run's threads during it."""
+        """The largest load of other jobs seen: before the run (where something was running at its start),
+        or beyond this run's threads during it."""
         if self.before is None:
             return None
-        return max([self.before] + [max(0.0, r - self.own_threads) for r in self.readings])
+        before = self.before if self.busy_before is None or self.busy_before > 0 else 0.0
+        return max([before] + [max(0.0, r - self.own_threads) for r in self.readings])
 
     def summary(self) -> dict[str, Any]:
         """``load_1min`` (before, max, last), ``other_load``, ``timing_contended`` and its reasons."""

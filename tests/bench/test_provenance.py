@@ -125,6 +125,30 @@ def test_a_job_running_at_the_start_marks_timings_contended_before_the_load_aver
     assert provenance.LoadWatch(1).summary()["timing_contended"] is False
 
 
+def test_a_job_that_just_ended_does_not_mark_a_quiet_run_contended(monkeypatch):
+    """A job that finished just before the run leaves the lagging load average high while nothing runs:
+    with no runnable task at the start and the readings within the run's own threads, the run is quiet
+    (the reading before is still recorded). Where something runs at the start, or the system does not
+    say, the reading before counts."""
+    from bench import provenance
+
+    decaying = iter([1.29, 1.4, 1.9, 1.45])  # the previous 2-thread benchmark's tail, then this run's 2 threads
+    monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(decaying), 0.0, 0.0))
+    monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 0)
+    watch = provenance.LoadWatch(2)
+    for _ in range(3):
+        watch.read()
+    summary = watch.summary()
+    assert summary["timing_contended"] is False and summary["other_load"] == 0.0
+    assert summary["load_1min"] == {"before": 1.29, "max": 1.9, "last": 1.45}
+    for busy in (1, None):
+        monkeypatch.setattr(provenance.os, "getloadavg", lambda: (1.29, 0.0, 0.0))
+        monkeypatch.setattr(provenance, "others_busy_cpus", lambda busy=busy: busy)
+        summary = provenance.LoadWatch(2).summary()
+        assert summary["other_load"] == 1.29 and summary["timing_contended"] is True
+        assert any("load 1.29" in r for r in summary["contention"])
+
+
 def test_default_threads_leave_the_cpus_other_processes_keep_busy(monkeypatch):
     """Threads per worker default to the idle usable CPUs shared by the workers (at least one), with a
     note naming the busy CPUs; where the system reports nothing, every usable CPU counts."""
