@@ -63,8 +63,8 @@ __all__ = [
 DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "event_representation": "contrast",
                                   "fusion": "gate", "head": "support-count"}
 
-#: What the shipped weights add to it (from stage 25 on; the fusion file is stage 38's, the spike-only file
-#: stage 25's, ``reports/neuspike-net/README.md``): the interval sequence at the key instant, weighed by
+#: What the shipped weights add to it (from stage 25 on; both files are stage 43's,
+#: ``reports/neuspike-net/README.md``): the interval sequence at the key instant, weighed by
 #: :class:`~neuspike.nets.network.KeyRefine`.
 SHIPPED_DESIGN: dict[str, Any] = {"key_estimates": "isi-sequence"}
 
