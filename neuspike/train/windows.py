@@ -320,6 +320,7 @@ class WindowTask:
         self.module = method.module
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
+        self._noise_levels: dict[int, str] = {}  # training window -> its noise level, read once
         self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
         fusion_only = [f"spike_floor_weight {self.data.spike_floor_weight}"] if self.data.spike_floor_weight else []
         if self.data.spike_floor_noise_weights:
@@ -378,7 +379,7 @@ class WindowTask:
 
     def noise_levels(self, step: int) -> list[str]:
         """The sensor-noise level of each window of ``step``'s batch, in batch order (read from the shard)."""
-        cache = self.__dict__.setdefault("_noise", {})
+        cache = self._noise_levels
         levels = []
         for i in self.batch_indices(step):
             if i not in cache:
