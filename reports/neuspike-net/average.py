@@ -20,21 +20,23 @@ from neuspike.errors import InputError
 from neuspike.methods.weights import check_card, file_sha256, load_safetensors, read_card, save_safetensors
 
 
+def load_checked(path: Path) -> tuple[dict, dict[str, torch.Tensor], str]:
+    """``(card, tensors, sha256)`` of a weights file that has a card whose recorded sha256 it matches."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such weights file")
+    card = read_card(path)
+    if card is None:
+        raise InputError(f"{path}: no JSON card beside it")
+    digest = file_sha256(path)
+    check_card(path, digest)
+    return card, load_safetensors(path), digest
+
+
 def average(dir_a: Path, dir_b: Path, weight: float, out_dir: Path, name: str = "neuspike-net") -> Path:
     if not 0.0 <= weight <= 1.0:
         raise InputError(f"weight: expected a number in [0, 1], got {weight}")
     paths = [Path(d) / f"{name}.safetensors" for d in (dir_a, dir_b)]
-    cards, states, digests = [], [], []
-    for p in paths:
-        if not p.is_file():
-            raise InputError(f"{p}: no such weights file")
-        card = read_card(p)
-        if card is None:
-            raise InputError(f"{p}: no JSON card beside it")
-        digests.append(file_sha256(p))
-        check_card(p, digests[-1])
-        cards.append(card)
-        states.append(load_safetensors(p))
+    cards, states, digests = zip(*(load_checked(p) for p in paths))
     if cards[0]["model"] != cards[1]["model"]:
         raise InputError(f"{paths[0]} and {paths[1]} name different models: {cards[0]['model']} / {cards[1]['model']}")
     a, b = states

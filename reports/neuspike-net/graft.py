@@ -22,28 +22,19 @@ from pathlib import Path
 import torch
 
 from neuspike.errors import InputError
-from neuspike.methods.weights import check_card, file_sha256, load_safetensors, read_card, save_safetensors
+from neuspike.methods.weights import save_safetensors
+
+from average import load_checked  # (this folder's average.py: the card-checked loading)
 
 #: Parameters in which a fusion card and its spike-only card legitimately differ.
 VARIANT_PARAMS = ("spike_only", "motion_gate")
 
 
-def _load(path: Path) -> tuple[dict, dict[str, torch.Tensor], str]:
-    if not path.is_file():
-        raise InputError(f"{path}: no such weights file")
-    card = read_card(path)
-    if card is None:
-        raise InputError(f"{path}: no JSON card beside it")
-    digest = file_sha256(path)
-    check_card(path, digest)
-    return card, load_safetensors(path), digest
-
-
 def graft(fusion_dir: Path, spike_dir: Path, out_dir: Path) -> Path:
     fusion_path = Path(fusion_dir) / "neuspike-net.safetensors"
     spike_path = Path(spike_dir) / "neuspike-net-spike.safetensors"
-    f_card, f_state, f_sha = _load(fusion_path)
-    s_card, s_state, s_sha = _load(spike_path)
+    f_card, f_state, f_sha = load_checked(fusion_path)
+    s_card, s_state, s_sha = load_checked(spike_path)
     f_params = {k: v for k, v in f_card["model"]["params"].items() if k not in VARIANT_PARAMS}
     s_params = {k: v for k, v in s_card["model"]["params"].items() if k not in VARIANT_PARAMS}
     if f_card["model"]["class"] != s_card["model"]["class"] or f_params != s_params:
