@@ -24,6 +24,14 @@ error of the image's mean level (image mean minus truth mean) over its windows.
 photographs (40 windows): the selection check for fast motion, which the test itself runs on the
 test photographs.
 
+``--grid heldout`` scores the noise test's points (none, small, medium, high at L = 1/4, S = 128) on
+pictures that no network here trains on, each through the four scene kinds (112 windows): the four
+held-out dead-leaves pictures and the three flat synthetic pictures of e2vid's selection harness
+(``reports/e2vid/candidates/leaves.py`` and ``flat.py``, written into ``--pictures``, default
+``runs/heldout-pictures``). The sweeps' grid judges a candidate's noisy points on the training
+photographs, which the network has seen; this grid judges them on unseen pictures (with
+``--spike-beside``, the fusion's margin over its spike-only file there).
+
 ``--spike-beside`` also scores each folder's spike-only file and prints the fusion's margin over it at
 every point: issue 20 asks the fusion to be above its spike-only variant, which the margins to the
 references do not show.
@@ -35,7 +43,9 @@ method returns them (the mean level counted from the spikes where the gain and d
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -56,6 +66,24 @@ NOISES = ("none", "high")
 SWEEP_POINTS = ([("light", f"L = 1/{round(1 / l)}", l, 128, "none") for l in (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)]
                 + [("motion", f"S = {m}", 1 / 4, m, "none") for m in (16, 32, 64, 256)]
                 + [("noise", f"noise {n}", 1 / 4, 128, n) for n in ("small", "medium", "high")])
+
+
+#: ``--grid heldout``: the noise test's points (L = 1/4, S = 128) on pictures outside both photograph splits.
+HELDOUT_NOISES = ("none", "small", "medium", "high")
+HELDOUT_PICTURES = ("leaves-1", "leaves-2", "leaves-3", "leaves-4", "horse", "shepp_logan_phantom", "logo")
+_HARNESS = Path(__file__).resolve().parents[1] / "e2vid" / "candidates"
+
+
+def heldout_pictures(out: Path) -> list[Path]:
+    """The held-out pictures' files in ``out``, written by e2vid's harness scripts where missing."""
+    paths = [out / f"{name}.png" for name in HELDOUT_PICTURES]
+    if not all(path.is_file() for path in paths):
+        for script, call in (("leaves.py", lambda m: m.main([str(out)])), ("flat.py", lambda m: m.main(out))):
+            spec = importlib.util.spec_from_file_location(f"_harness_{script[:-3]}", _HARNESS / script)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            call(module)
+    return paths
 
 
 #: The parameters a candidate's card may set beyond the registry's defaults.
@@ -113,10 +141,11 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="*", help="weights folders (default: the shipped weights)")
     p.add_argument("--references", default="snm", help="methods scored beside them (default: snm)")
-    p.add_argument("--grid", choices=("quick", "sweeps", "fast"), default="quick",
+    p.add_argument("--grid", choices=("quick", "sweeps", "fast", "heldout"), default="quick",
                    help="quick: 48 windows, L = 1/32, 1/8, 1/2 without and with high noise (the default); "
                    "sweeps: the full sweeps' 12 points over four scene kinds (192 windows); "
-                   "fast: the fast-motion test's pans at 1x-16x, L = 1/4 and 1/16, S = 256 (40 windows)")
+                   "fast: the fast-motion test's pans at 1x-16x, L = 1/4 and 1/16, S = 256 (40 windows); "
+                   "heldout: the noise test's four levels on seven pictures no network trains on (112 windows)")
     p.add_argument("--method", choices=("neuspike-net", "neuspike-net-spike"), default="neuspike-net",
                    help="which variant's weights file each folder is read for (default neuspike-net)")
     p.add_argument("--level", choices=("counts", "network"), default="counts",
@@ -125,6 +154,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="with the fusion (the default --method): also score each folder's spike-only file and print "
                         "the fusion's margin over it at every point (issue 20 asks the fusion to be the better one)")
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    p.add_argument("--pictures", type=Path, default=Path("runs/heldout-pictures"),
+                   help="--grid heldout: folder for the held-out pictures (written there if missing; "
+                        "default runs/heldout-pictures)")
     p.add_argument("--digits", type=int, default=2,
                    help="decimals of each folder's mean PSNR (default 2; a rule's 'not lower' may need more)")
     args = p.parse_args(argv)
@@ -139,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     elif args.grid == "sweeps":
         cells = [(f"{kind}:{photo}", label, light, motion, noise) for (_, label, light, motion, noise) in SWEEP_POINTS
                  for photo in PHOTOS for kind in ("pan", "zoom", "fan", "still")]
+    elif args.grid == "heldout":
+        cells = [(f"{kind}:{path}", f"noise {noise}", 1 / 4, 128, noise) for noise in HELDOUT_NOISES
+                 for path in heldout_pictures(args.pictures) for kind in ("pan", "zoom", "fan", "still")]
     else:  # the fast-motion test's own speeds, lights and S (bench.fast_motion), on training photographs
         from bench import fast_motion as fm
 
