@@ -21,14 +21,14 @@ from neuspike.methods.precision import PRECISIONS
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
                "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
-               "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights")
+               "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
-              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "train_parts",
-              "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "size", "view",
+              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "spike_floor_terms",
+              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "size", "view",
               "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
@@ -148,6 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="single windows, fusion networks: the spike floor's weight for the windows of the named "
                         "noise levels (none, small, medium, high), in place of --spike-floor-weight, which the "
                         "others keep; e.g. medium=8,high=16")
+    d.add_argument("--spike-floor-terms", choices=("both", "ssim"),
+                   help="single windows, fusion networks: what the spike floor compares per crop: 'both' the L1 + "
+                        "SSIM loss (default), 'ssim' the SSIM loss alone")
     d.add_argument("--train-parts", choices=("all", "motion"),
                    help="single windows, fusion networks with --init-from: 'motion' trains the motion path only and "
                         "holds the rest (so the spike-only variant stays as given; default all)")
@@ -275,7 +278,7 @@ def spec_from_args(args: argparse.Namespace):
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
                  "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
-                 "spike_floor_weight", "train_parts", "sweep_fraction", "sweep_scenes"):
+                 "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

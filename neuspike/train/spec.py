@@ -178,6 +178,11 @@ class WindowData:
         named keep; the term is then the batch mean of ``w_i * relu(l_fusion,i - l_spike,i)``. The
         floor can then weigh heavily where the events are noisy without taxing the clean crops, where
         the events carry the gain. Default None (every crop at ``spike_floor_weight``).
+    spike_floor_terms : ``"both"`` or ``"ssim"``
+        What the spike floor compares crop by crop: ``"both"`` (the default, earlier specs), the crop's
+        L1 + ``ssim_weight`` * SSIM loss; ``"ssim"``, its SSIM loss alone. Where the events raise the
+        fusion's PSNR but lower its SSIM (fine noise over flat regions at heavy sensor noise), the L1 gain
+        can pay for the SSIM loss inside ``"both"``; ``"ssim"`` floors the structure alone.
     train_parts : ``"all"`` or ``"motion"``
         ``"motion"`` (fusion networks, with ``init_from``): only the motion path learns (the motion
         encoder, the fusion modules, the motion gate, the event transformer); the texture path, the
@@ -231,16 +236,21 @@ class WindowData:
     crop_trim: int = 0
     spike_floor_weight: float = 0.0
     spike_floor_noise_weights: dict[str, float] | None = None
+    spike_floor_terms: str = "both"
     train_parts: str = "all"
     sweep_fraction: float = 0.0
     sweep_scenes: bool = False
     sweep_scene_weights: tuple[float, float, float, float] | None = None
 
+    #: What ``spike_floor_terms`` may be.
+    FLOOR_TERMS: ClassVar[tuple[str, ...]] = ("both", "ssim")
     #: What ``train_parts`` may be.
     TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
 
     def __post_init__(self) -> None:
         put = object.__setattr__
+        if self.spike_floor_terms not in self.FLOOR_TERMS:
+            raise InputError(f"spike_floor_terms: expected one of {self.FLOOR_TERMS}, got {self.spike_floor_terms!r}")
         if self.train_parts not in self.TRAIN_PARTS:
             raise InputError(f"train_parts: expected one of {self.TRAIN_PARTS}, got {self.train_parts!r}")
         if isinstance(self.crop_trim, bool) or not isinstance(self.crop_trim, int) or not 0 <= self.crop_trim <= 7:

@@ -301,8 +301,9 @@ class WindowTask:
       exported as ``<name>-spike``.
     * **spike floor**: with ``spike_floor_weight`` (or ``spike_floor_noise_weights``), each fusion step
       also runs the spike-only forward of the same crops without gradient and adds the batch mean of
-      ``w_i * relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss and ``w_i``
-      the weight of crop i's noise level (``spike_floor_weight`` for the levels not named).
+      ``w_i * relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss (its SSIM
+      loss alone with ``spike_floor_terms="ssim"``) and ``w_i`` the weight of crop i's noise level
+      (``spike_floor_weight`` for the levels not named).
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -326,6 +327,8 @@ class WindowTask:
         if self.data.spike_floor_noise_weights:
             fusion_only.append(f"spike_floor_noise_weights {self.data.spike_floor_noise_weights}")
         fusion_only += [f"train_parts {self.data.train_parts!r}"] if self.data.train_parts != "all" else []
+        fusion_only += ([f"spike_floor_terms {self.data.spike_floor_terms!r}"]
+                        if self.data.spike_floor_terms != "both" else [])
         if fusion_only and not self.fusion:
             raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
@@ -439,14 +442,17 @@ class WindowTask:
         """Whether parameter ``name`` is held (does not learn) in this run (``train_parts``)."""
         return self.data.train_parts == "motion" and not name.startswith(MOTION_PREFIXES)
 
-    def crop_losses(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Each crop's own L1 + ``ssim_weight`` * SSIM loss, (B,): the batch mean of it is the main loss."""
+    def crop_losses(self, pred: torch.Tensor, target: torch.Tensor, terms: str = "both") -> torch.Tensor:
+        """Each crop's own L1 + ``ssim_weight`` * SSIM loss, (B,): the batch mean of it is the main loss.
+        ``terms="ssim"``: each crop's SSIM loss alone."""
         import kornia
 
         pred = pred.float()
-        l1 = (pred - target).abs().mean(dim=(1, 2, 3))
         ssim_map = kornia.metrics.ssim(pred, target, window_size=self.data.ssim_window, max_val=1.0)
-        return l1 + self.data.ssim_weight * ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
+        structure = ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
+        if terms == "ssim":
+            return structure
+        return (pred - target).abs().mean(dim=(1, 2, 3)) + self.data.ssim_weight * structure
 
     def forward(self, inputs: Sequence[torch.Tensor], variant: str, *, parts: bool = False
                 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
@@ -503,7 +509,8 @@ class WindowTask:
             with torch.no_grad(), autocast():
                 floor = self.forward(inputs, "spike")
             image = pred[0] if isinstance(pred, tuple) else pred
-            excess = (self.crop_losses(image, target) - self.crop_losses(floor, target)).clamp_min(0.0)
+            terms = self.data.spike_floor_terms
+            excess = (self.crop_losses(image, target, terms) - self.crop_losses(floor, target, terms)).clamp_min(0.0)
             if isinstance(weights, torch.Tensor):
                 loss = loss + (weights * excess).mean()
             else:  # (one weight: the sum as every spec before the noise weights computed it)

@@ -566,6 +566,51 @@ def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tm
     assert seen == positive == {"none", "high"}  # both weights were used, on crops with an excess
 
 
+def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_path, one_torch_thread):
+    """spike_floor_terms='ssim': the floor is w * mean_i(relu(s_fusion,i - s_spike,i)), s a crop's SSIM loss
+    (1 - SSIM) / 2 alone, computed here straight from kornia's SSIM map; the L1 part of the loss is left out
+    of it. Bad values and spike-only networks are refused by name; the spec round-trips and the shard key
+    does not change."""
+    import kornia
+
+    from neuspike.methods import create
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    with pytest.raises(InputError, match="spike_floor_terms"):
+        WindowData(spike_floor_terms="l1")
+    with pytest.raises(InputError, match="spike_floor_terms 'ssim'.*fusion networks only"):
+        WindowTask(TrainSpec(data=WindowData(spike_floor_terms="ssim")), create("neuspike-net-spike"))
+    assert WindowData(spike_floor_terms="ssim").key(0) == WindowData().key(0)
+    spec = tiny_spec(tmp_path, spike_floor_weight=3.0, spike_floor_terms="ssim", params={"motion_gate": "stats"})
+    assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task = trainer.task
+    plain = WindowTask(tiny_spec(tmp_path, params={"motion_gate": "stats"}), trainer.method)
+    plain.train_paths = task.train_paths
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
+        for p in trainer.module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+        step = _fusion_step(task)
+        loss, parts = task.step_loss(step, trainer.autocast)
+        base, _ = plain.step_loss(step, trainer.autocast)
+        inputs, target = task.batch(step)
+
+        def structure(image):
+            ssim_map = kornia.metrics.ssim(image.float(), target, window_size=spec.data.ssim_window, max_val=1.0)
+            return ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
+
+        fusion, spike = task.forward(inputs, "fusion"), task.forward(inputs, "spike")
+        excess = (structure(fusion) - structure(spike)).clamp_min(0)
+        both = (task.crop_losses(fusion, target) - task.crop_losses(spike, target)).clamp_min(0)
+    assert float(excess.mean()) > 0  # (the term is tested where it is not 0)
+    assert not torch.allclose(excess, both)  # the L1 part is not in it
+    assert parts["spike_floor"] == pytest.approx(float(excess.mean()), rel=1e-5, abs=1e-7)
+    assert float(loss - base) == pytest.approx(3.0 * float(excess.mean()), rel=1e-4, abs=1e-7)
+
+
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
     """train_parts='motion' trains only the motion path: every other parameter (so the spike-only variant)
     ends as init_from gave it, the motion parameters move; it needs init_from and a fusion network."""
