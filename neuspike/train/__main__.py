@@ -21,14 +21,15 @@ from neuspike.methods.precision import PRECISIONS
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
                "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
-               "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights")
+               "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights",
+               "broad_fraction")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
               "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "spike_floor_terms",
-              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "size", "view",
+              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction", "size", "view",
               "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
@@ -160,6 +161,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--sweep-scenes", action="store_const", const=True, default=None,
                    help="single windows, with --sweep-fraction: the sweep cells also take the sweeps' scenes (pan, "
                         "zoom, fan, still alike, with the sweeps' zoom rate and fan)")
+    d.add_argument("--broad-fraction", type=float, metavar="P",
+                   help="single windows: a fraction P of the picture cells (pan, zoom, fan, still) take a broad-leaves "
+                        "picture (wide, mildly shaded regions) in place of a training photograph's region (default 0)")
     d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
                    help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
                         "(e.g. 1,1,4,1; default equal)")
@@ -278,7 +282,8 @@ def spec_from_args(args: argparse.Namespace):
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
                  "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
-                 "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes"):
+                 "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes",
+                 "broad_fraction"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

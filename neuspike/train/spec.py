@@ -211,6 +211,14 @@ class WindowData:
         With ``sweep_scenes``: the relative shares of the four kinds among the sweep cells (drawn from
         the same stream), e.g. ``(1, 1, 4, 1)`` for four fans to each pan. Default None: equal shares
         (the draws, and shard keys, of specs without the field).
+    broad_fraction : float
+        Fraction of the picture cells (pan, zoom, fan, still) whose picture is a broad-leaves image (the
+        first frame of a still ``dead_leaves`` scene whose smallest leaf is 5-15 % of the view's side:
+        wide, mildly shaded regions with about half the sharp edges of the small-leaved scenes, which
+        the training photographs lack) in place of a training photograph's region. The choice, the leaf size and the
+        scene's seed come from a stream of their own, and every other draw of the cell is as it would be
+        with the photograph, so a shard with the fraction differs from one without only in those
+        pictures. 0 to 1; default 0 (earlier specs and their shard keys mean 0).
     """
 
     kind: ClassVar[str] = "windows"
@@ -241,6 +249,7 @@ class WindowData:
     sweep_fraction: float = 0.0
     sweep_scenes: bool = False
     sweep_scene_weights: tuple[float, float, float, float] | None = None
+    broad_fraction: float = 0.0
 
     #: What ``spike_floor_terms`` may be.
     FLOOR_TERMS: ClassVar[tuple[str, ...]] = ("both", "ssim")
@@ -257,7 +266,7 @@ class WindowData:
             raise InputError(f"crop_trim: expected a whole number of pixels 0..7, got {self.crop_trim!r}")
         for name in ("view", "train_items", "val_items", "workers", "ssim_window"):
             _whole(name, getattr(self, name), 1)
-        for name in ("spike_only_fraction", "sweep_fraction"):
+        for name in ("spike_only_fraction", "sweep_fraction", "broad_fraction"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
                 raise InputError(f"{name}: expected a fraction in [0, 1], got {value!r}")
@@ -342,6 +351,8 @@ class WindowData:
             key["sweep_scenes"] = True
         if self.sweep_scene_weights is not None:  # likewise
             key["sweep_scene_weights"] = list(self.sweep_scene_weights)
+        if self.broad_fraction:  # likewise
+            key["broad_fraction"] = self.broad_fraction
         return key
 
 

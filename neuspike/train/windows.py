@@ -95,6 +95,29 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
     return str(path)
 
 
+def _broad_source(spec: TrainSpec, source_dir: Path, split: str, index: int, size: tuple[int, int]) -> str | None:
+    """With ``broad_fraction``: for a drawn share of the cells, a broad-leaves picture of ``size`` saved
+    under ``source_dir`` (the first frame of a still ``dead_leaves`` scene, smallest leaf 5-15 % of the
+    side), from a stream of its own; None for the other cells."""
+    if not spec.data.broad_fraction:
+        return None
+    rng = derive_rng(spec.seed, "broad-picture", split, int(index))
+    if not rng.random() < spec.data.broad_fraction:
+        return None
+    radius, seed = float(rng.uniform(0.05, 0.15)), int(rng.integers(2**31))
+    path = source_dir / f"{split}-{index:06d}-broad-{seed}.npy"
+    if not path.exists():
+        from neuspike.scenes import make_scene
+
+        scene = make_scene(SceneSpec("dead_leaves", size=size, velocity_px_s=(0.0, 0.0), seed=seed,
+                                     leaf_min_radius=radius))
+        picture = np.clip(scene.render(np.array([0.0]))[0], 0.0, 1.0).astype(np.float32)
+        buf = io.BytesIO()
+        np.save(buf, picture)
+        write_bytes(path, buf.getvalue())
+    return str(path)
+
+
 def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.PathLike
               ) -> tuple[SceneSpec, Condition, int, dict[str, Any]]:
     """The (scene, condition, simulation seed) of cell ``index`` of ``split``, and a description."""
@@ -128,6 +151,7 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
     else:
         image = _photo_source(spec, rng, Path(source_dir), split, index, size, relative_scale)
+        image = _broad_source(spec, Path(source_dir), split, index, size) or image  # (the draws above kept)
         focus = (float(rng.uniform(0.2, 0.8) * size[0]), float(rng.uniform(0.2, 0.8) * size[1]))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
@@ -157,6 +181,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     sim_seed = int(rng.integers(2**31))
     info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
+    if data.broad_fraction:  # (the descriptions of earlier specs' cells stay as they were)
+        info["broad"] = kind != "dead_leaves" and "-broad-" in Path(scene.image).name
     if data.sweep_fraction:  # (the descriptions of earlier specs' cells stay as they were)
         info["at_sweep"] = at_sweep
     if data.sweep_scenes:

@@ -166,6 +166,52 @@ def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_r
         WindowData(sweep_fraction=0.5, sweep_scenes="yes")
 
 
+def test_broad_fraction_swaps_only_the_picture_for_a_broad_leaves_one(tmp_path):
+    """broad_fraction p: about p of the picture cells take a broad-leaves picture (the saved file is the
+    first frame of the still dead-leaves scene named by its seed, rendered again here), with every other
+    draw (kind, scene parameters, condition, simulation seed) that of the same spec without it; dead-leaves
+    cells are untouched. The shard key names the fraction only when it is set; bad fractions are refused."""
+    import dataclasses
+    from pathlib import Path
+
+    from neuspike.scenes import SceneSpec, make_scene
+    from neuspike.train.__main__ import build_parser, spec_from_args
+    from neuspike.utils.rng import derive_rng
+
+    base, spec = tiny_spec(tmp_path, view=40), tiny_spec(tmp_path, view=40, broad_fraction=0.5)
+    broad = pictures = 0
+    for i in range(80):
+        before, after = draw_cell(base, "train", i, tmp_path), draw_cell(spec, "train", i, tmp_path)
+        assert after[1:3] == before[1:3]  # condition, simulation seed
+        assert dataclasses.replace(after[0], image=before[0].image) == before[0]
+        if before[0].kind == "dead_leaves":
+            assert after[0] == before[0] and after[3]["broad"] is False
+            continue
+        pictures += 1
+        if after[0].image == before[0].image:
+            assert after[3]["broad"] is False
+            continue
+        broad += 1
+        assert after[3]["broad"] is True
+        rng = derive_rng(spec.seed, "broad-picture", "train", i)  # the picture's own stream: draw, radius, seed
+        assert rng.random() < 0.5
+        radius, seed = rng.uniform(0.05, 0.15), int(rng.integers(2**31))
+        assert Path(after[0].image).name == f"train-{i:06d}-broad-{seed}.npy"
+        scene = make_scene(SceneSpec("dead_leaves", size=(40, 40), velocity_px_s=(0.0, 0.0), seed=seed,
+                                     leaf_min_radius=radius))
+        saved = np.load(after[0].image)
+        assert saved.dtype == np.float32 and saved.std() > 0.01
+        np.testing.assert_array_equal(saved, np.clip(scene.render(np.array([0.0]))[0], 0, 1).astype(np.float32))
+    assert pictures > 30 and abs(broad / pictures - 0.5) < 4 * (0.25 / pictures) ** 0.5
+    assert "broad" not in draw_cell(base, "train", 0, tmp_path)[3]
+    assert spec.data.key(0)["broad_fraction"] == 0.5 and "broad_fraction" not in base.data.key(0)
+    for bad in (-0.1, 1.5, True, "half"):
+        with pytest.raises(InputError, match="broad_fraction"):
+            WindowData(broad_fraction=bad)
+    args = build_parser().parse_args(["neuspike-net", "--broad-fraction", "0.3", "--out", str(tmp_path / "r")])
+    assert spec_from_args(args).data.broad_fraction == 0.3
+
+
 def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
     """sweep_scene_weights: the sweep cells' kinds in the given shares (all fans with (0, 0, 1, 0); about
     4 / 7 fans with (1, 1, 4, 1)), each at one of the sweeps' points; the other cells unchanged."""
