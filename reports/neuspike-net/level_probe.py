@@ -1,6 +1,6 @@
 """Which level of the motion path costs the fusion its SSIM at the sweeps' high noise (a probe, training photographs).
 
-    python reports/neuspike-net/level_probe.py [FOLDER] [--noise high] [--threads 1]
+    python reports/neuspike-net/level_probe.py [FOLDER] [--noise high] [--threads 1] [--heldout]
 
 Simulates the full sweeps' noise point (L = 1/4, S = 128, the given noise level) on the four training
 photographs of ``fullsize_check.py`` through all four scene kinds (16 windows, seed 0: the grid's own
@@ -8,11 +8,14 @@ cells), and scores the fusion (float32, the method's counted mean level) with it
 gains as trained and with one level's gain scaled by 0 or 0.5 at a time (x_m^3 .. x_m^0; 0 everywhere
 is the spike-only network inside the fusion), beside the folder's spike-only file. Prints mean PSNR /
 SSIM per setting and the SSIM by scene kind, so a reader sees where the events cost structure.
+``--heldout`` uses the seven held-out pictures of ``fullsize_check.py --grid heldout`` (28 windows) in place
+of the training photographs.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -24,7 +27,7 @@ from neuspike.metrics import ssim
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 
-from fullsize_check import PHOTOS, trained_design  # noqa: E402  (beside this script: Python puts its folder on the path)
+from fullsize_check import PHOTOS, heldout_pictures, trained_design  # noqa: E402  (beside this script: Python puts its folder on the path)
 
 KINDS = ("pan", "zoom", "fan", "still")
 LEVELS = ("x_m^3", "x_m^2", "x_m^1", "x_m^0")
@@ -35,9 +38,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("folder", nargs="?", help="weights folder (default: the shipped weights)")
     p.add_argument("--noise", default="high", help="the noise level (default high)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    p.add_argument("--heldout", action="store_true",
+                   help="the held-out pictures of fullsize_check.py --grid heldout in place of the training photographs")
+    p.add_argument("--pictures", type=Path, default=Path("runs/heldout-pictures"),
+                   help="with --heldout: their folder (written there if missing; default runs/heldout-pictures)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
-    cells = [(kind, photo) for kind in KINDS for photo in PHOTOS]
+    pictures = [str(path) for path in heldout_pictures(args.pictures)] if args.heldout else list(PHOTOS)
+    cells = [(kind, photo) for kind in KINDS for photo in pictures]
     cond = Condition(light=1 / 4, motion=128, noise=args.noise, effects=grids.DEFAULT_EFFECTS)
     samples = [simulate_sample(grids.scene_entry(f"{kind}:{photo}", (400, 250)).spec, cond, sensor=SensorConfig(),
                                seed=0, modalities=("spikes", "events")) for kind, photo in cells]
@@ -55,10 +63,12 @@ def main(argv: list[str] | None = None) -> int:
         return np.array(psnr), np.array(structure)
 
     def line(label: str, psnr: np.ndarray, structure: np.ndarray) -> None:
-        kinds = " / ".join(f"{structure[i * len(PHOTOS):(i + 1) * len(PHOTOS)].mean():.4f}" for i in range(len(KINDS)))
+        n = len(pictures)
+        kinds = " / ".join(f"{structure[i * n:(i + 1) * n].mean():.4f}" for i in range(len(KINDS)))
         print(f"{label:34s} {psnr.mean():6.2f} / {structure.mean():.4f}   SSIM {' / '.join(KINDS)}: {kinds}")
 
-    print(f"noise {args.noise}, L = 1/4, S = 128, {len(samples)} windows of training photographs")
+    source = "held-out pictures" if args.heldout else "training photographs"
+    print(f"noise {args.noise}, L = 1/4, S = 128, {len(samples)} windows of {source}")
     line("spike-only file", *score(spike))
     gate = fusion.module.motion_gate
     trained = gate.forward
