@@ -214,11 +214,11 @@ class WindowData:
     broad_fraction : float
         Fraction of the picture cells (pan, zoom, fan, still) whose picture is a broad-leaves image (the
         first frame of a still ``dead_leaves`` scene whose smallest leaf is 5-15 % of the view's side:
-        wide, mildly shaded regions with about half the sharp edges of the small-leaved scenes, which
-        the training photographs lack) in place of a training photograph's region. The choice, the leaf size and the
-        scene's seed come from a stream of their own, and every other draw of the cell is as it would be
-        with the photograph, so a shard with the fraction differs from one without only in those
-        pictures. 0 to 1; default 0 (earlier specs and their shard keys mean 0).
+        wide, mildly shaded regions with about half the sharp edges of the small-leaved scenes) in place
+        of a training photograph's region. The choice, the leaf size and the scene's seed come from a
+        stream of their own, and every other draw of the cell is as it would be with the photograph, so
+        a shard with the fraction differs from one without only in those pictures. 0 to 1; default 0
+        (earlier specs and their shard keys mean 0).
     """
 
     kind: ClassVar[str] = "windows"

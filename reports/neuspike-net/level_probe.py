@@ -39,7 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--noise", default="high", help="the noise level (default high)")
     p.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
     p.add_argument("--heldout", action="store_true",
-                   help="the held-out pictures of fullsize_check.py --grid heldout in place of the training photographs")
+                   help="the held-out pictures of fullsize_check.py --grid heldout in place of the training "
+                        "photographs")
     p.add_argument("--pictures", type=Path, default=Path("runs/heldout-pictures"),
                    help="with --heldout: their folder (written there if missing; default runs/heldout-pictures)")
     args = p.parse_args(argv)
