@@ -518,10 +518,6 @@ def test_the_crop_losses_average_to_the_main_loss():
     assert float(task.crop_losses(target, target).abs().max()) == pytest.approx(0.0, abs=1e-6)
 
 
-def _fusion_step(task) -> int:
-    return next(k for k in range(100) if task.step_variant(k) == "fusion")
-
-
 def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_vanishes_with_a_shut_gate(
         tmp_path, one_torch_thread):
     """spike_floor_weight w adds w * mean(relu(l_fusion - l_spike)) on a fusion step (the two forwards
@@ -539,19 +535,24 @@ def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_va
     plain = WindowTask(tiny_spec(tmp_path, params={"motion_gate": "stats"}), trainer.method)
     plain.train_paths = trainer.task.train_paths
     task = trainer.task
-    step = _fusion_step(task)
     gen = torch.Generator().manual_seed(0)
     with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
         for p in trainer.module.parameters():
             p.add_(0.1 * torch.randn(p.shape, generator=gen))
+        # the moved fusion is worse than its spike-only self on some crops, not on all (it depends on the
+        # network's initial draw): the first fusion step of the first 40 steps with an excess is the one tested
+        for step in [k for k in range(40) if task.step_variant(k) == "fusion"]:
+            inputs, target = task.batch(step)
+            excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
+                      - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0).mean()
+            if float(excess) > 0:
+                break
         loss, parts = task.step_loss(step, trainer.autocast)
         base, _ = plain.step_loss(step, trainer.autocast)
-        inputs, target = task.batch(step)
-        excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
-                  - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0).mean()
     assert float(excess) > 0  # (the term is tested where it is not 0)
     assert parts["spike_floor"] == pytest.approx(float(excess), rel=1e-5, abs=1e-7)
-    assert float(loss - base) == pytest.approx(2.0 * float(excess), rel=1e-4, abs=1e-7)
+    # (the losses are near 2 after the move: float32 rounds their difference to a few 1e-7)
+    assert float(loss - base) == pytest.approx(2.0 * float(excess), rel=1e-4, abs=1e-6)
     spike_step = next(k for k in range(100) if task.step_variant(k) == "spike")
     with torch.no_grad():
         assert "spike_floor" not in task.step_loss(spike_step, trainer.autocast)[1]
@@ -628,33 +629,42 @@ def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_pa
     with pytest.raises(InputError, match="spike_floor_terms 'ssim'.*fusion networks only"):
         WindowTask(TrainSpec(data=WindowData(spike_floor_terms="ssim")), create("neuspike-net-spike"))
     assert WindowData(spike_floor_terms="ssim").key(0) == WindowData().key(0)
-    spec = tiny_spec(tmp_path, spike_floor_weight=3.0, spike_floor_terms="ssim", params={"motion_gate": "stats"})
+    small = dict(batch=4, train_items=6, params={"motion_gate": "stats"})
+    spec = tiny_spec(tmp_path, spike_floor_weight=3.0, spike_floor_terms="ssim", **small)
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
     trainer = Trainer(spec, quiet=True)
     trainer.task.prepare(trainer._bar)
     task = trainer.task
-    plain = WindowTask(tiny_spec(tmp_path, params={"motion_gate": "stats"}), trainer.method)
+    plain = WindowTask(tiny_spec(tmp_path, **small), trainer.method)
     plain.train_paths = task.train_paths
     gen = torch.Generator().manual_seed(0)
     with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
         for p in trainer.module.parameters():
             p.add_(0.1 * torch.randn(p.shape, generator=gen))
-        step = _fusion_step(task)
-        loss, parts = task.step_loss(step, trainer.autocast)
-        base, _ = plain.step_loss(step, trainer.autocast)
-        inputs, target = task.batch(step)
+    checked = 0
+    # the fusion's SSIM is worse than its spike-only self's on some crops of a moved network, not on all:
+    # every fusion step is checked, and at least one of them with a positive term
+    for step in [k for k in range(40) if task.step_variant(k) == "fusion"][:6]:
+        with torch.no_grad():
+            loss, parts = task.step_loss(step, trainer.autocast)
+            base, _ = plain.step_loss(step, trainer.autocast)
+            inputs, target = task.batch(step)
 
-        def structure(image):
-            ssim_map = kornia.metrics.ssim(image.float(), target, window_size=spec.data.ssim_window, max_val=1.0)
-            return ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
+            def structure(image):
+                ssim_map = kornia.metrics.ssim(image.float(), target, window_size=spec.data.ssim_window,
+                                               max_val=1.0)
+                return ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
 
-        fusion, spike = task.forward(inputs, "fusion"), task.forward(inputs, "spike")
-        excess = (structure(fusion) - structure(spike)).clamp_min(0)
-        both = (task.crop_losses(fusion, target) - task.crop_losses(spike, target)).clamp_min(0)
-    assert float(excess.mean()) > 0  # (the term is tested where it is not 0)
-    assert not torch.allclose(excess, both)  # the L1 part is not in it
-    assert parts["spike_floor"] == pytest.approx(float(excess.mean()), rel=1e-5, abs=1e-7)
-    assert float(loss - base) == pytest.approx(3.0 * float(excess.mean()), rel=1e-4, abs=1e-7)
+            fusion, spike = task.forward(inputs, "fusion"), task.forward(inputs, "spike")
+            excess = (structure(fusion) - structure(spike)).clamp_min(0)
+            both = (task.crop_losses(fusion, target) - task.crop_losses(spike, target)).clamp_min(0)
+        assert parts["spike_floor"] == pytest.approx(float(excess.mean()), rel=1e-5, abs=1e-7)
+        # (the two losses are near 2 here: float32 rounds their difference to a few 1e-7)
+        assert float(loss - base) == pytest.approx(3.0 * float(excess.mean()), rel=1e-4, abs=1e-6)
+        if float(excess.mean()) > 0:
+            checked += 1
+            assert not torch.allclose(excess, both)  # the L1 part is not in it
+    assert checked > 0  # (the term is tested where it is not 0)
 
 
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
