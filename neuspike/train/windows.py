@@ -65,10 +65,11 @@ LEGACY_SCALE_RANGE = (0.3, 1.2)
 
 
 def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, split: str, index: int,
-                  size: tuple[int, int], relative_scale: float | None = None) -> str:
+                  size: tuple[int, int], relative_scale: float | None = None, save: bool = True) -> str | None:
     """A region of a training photograph resized to ``size`` (width, height), saved under ``source_dir``;
     ``relative_scale`` (drawn here from :data:`LEGACY_SCALE_RANGE` when None) is its scale relative to
-    the photograph filling the 400x250 sensor."""
+    the photograph filling the 400x250 sensor. ``save=False``: only the region's draws are made (so the
+    cell's later draws stay the same), nothing is cut or written, and None is returned."""
     data: WindowData = spec.data
     name = data.photos[int(rng.integers(len(data.photos)))]
     luma = read_photo(name)
@@ -84,6 +85,8 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
         shrink = min(1.0, w / sw, h / sh)
         sw, sh = max(1, min(w, int(sw * shrink))), max(1, min(h, int(sh * shrink)))
     y0, x0 = int(rng.integers(0, h - sh + 1)), int(rng.integers(0, w - sw + 1))
+    if not save:
+        return None
     region = luma[y0:y0 + sh, x0:x0 + sw]
     interp = cv2.INTER_AREA if sw > vw else cv2.INTER_LINEAR
     region = np.clip(cv2.resize(region, (vw, vh), interpolation=interp), 0.0, 1.0).astype(np.float32)
@@ -150,8 +153,10 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     if kind == "dead_leaves":
         scene = SceneSpec(kind="dead_leaves", size=size, velocity_px_s=velocity, seed=int(rng.integers(2**31)))
     else:
-        image = _photo_source(spec, rng, Path(source_dir), split, index, size, relative_scale)
-        image = _broad_source(spec, Path(source_dir), split, index, size) or image  # (the draws above kept)
+        broad = _broad_source(spec, Path(source_dir), split, index, size)
+        # the photograph's draws are made either way, so the cell's later draws do not depend on the picture
+        photo = _photo_source(spec, rng, Path(source_dir), split, index, size, relative_scale, save=broad is None)
+        image = broad or photo
         focus = (float(rng.uniform(0.2, 0.8) * size[0]), float(rng.uniform(0.2, 0.8) * size[1]))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
