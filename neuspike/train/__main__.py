@@ -22,15 +22,15 @@ from neuspike.methods.precision import PRECISIONS
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
                "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
                "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights",
-               "broad_fraction")
+               "broad_fraction", "gate_targets", "gate_target_weight")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
               "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "spike_floor_terms",
-              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction", "size", "view",
-              "length", "kinds",
+              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction", "gate_targets",
+              "gate_target_weight", "size", "view", "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
@@ -164,6 +164,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--broad-fraction", type=float, metavar="P",
                    help="single windows: a fraction P of the picture cells (pan, zoom, fan, still) take a broad-leaves "
                         "picture (wide, mildly shaded regions) in place of a training photograph's region (default 0)")
+    d.add_argument("--gate-targets", metavar="NOISE:LEVEL=GAIN,...",
+                   help="single windows, fusion networks with a motion gate: target gains for the gate's motion levels "
+                        "0-3 (x_m^0..x_m^3) on the windows of the named noise levels, each in [0, 2) (1 leaves a level "
+                        "as it is, 0 shuts it); e.g. high:1=0,medium:1=0.5 (needs --gate-target-weight)")
+    d.add_argument("--gate-target-weight", type=float, metavar="W",
+                   help="single windows: weight of the --gate-targets term (the mean squared gain miss; default 0)")
     d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
                    help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
                         "(e.g. 1,1,4,1; default equal)")
@@ -226,6 +232,25 @@ def _level_weights(text: str, flag: str) -> dict[str, float]:
     return out
 
 
+def _gate_targets(text: str) -> dict[str, dict[str, float]]:
+    """``"NOISE:LEVEL=GAIN,..."`` -> {noise level: {motion level: gain}}; a clear error otherwise (the
+    names and ranges are checked by the spec)."""
+    from neuspike.errors import InputError
+
+    out: dict[str, dict[str, float]] = {}
+    for item in _list(text):
+        noise, colon, rest = item.partition(":")
+        level, eq, value = rest.partition("=")
+        try:
+            gain = float(value)
+        except ValueError:
+            eq = ""
+        if not colon or not eq or not noise.strip() or not level.strip():
+            raise InputError(f"--gate-targets: expected NOISE:LEVEL=GAIN,... (e.g. high:1=0,medium:1=0.5), got {text!r}")
+        out.setdefault(noise.strip(), {})[level.strip()] = gain
+    return out
+
+
 def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
     """``"LOW,HIGH"`` -> (low, high); a clear error naming ``flag`` otherwise."""
     return _numbers(text, flag, f"LOW,HIGH{unit}", 2)
@@ -283,7 +308,7 @@ def spec_from_args(args: argparse.Namespace):
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
                  "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
                  "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes",
-                 "broad_fraction"):
+                 "broad_fraction", "gate_target_weight"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:
@@ -292,6 +317,8 @@ def spec_from_args(args: argparse.Namespace):
         kw["train_items" if kind == "windows" else "windows"] = args.windows
     if args.spike_floor_noise_weights is not None:
         kw["spike_floor_noise_weights"] = _level_weights(args.spike_floor_noise_weights, "--spike-floor-noise-weights")
+    if args.gate_targets is not None:
+        kw["gate_targets"] = _gate_targets(args.gate_targets)
     if args.sweep_scene_weights is not None:
         kw["sweep_scene_weights"] = _numbers(args.sweep_scene_weights, "--sweep-scene-weights",
                                              "PAN,ZOOM,FAN,STILL", 4)

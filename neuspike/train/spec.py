@@ -94,6 +94,37 @@ def _loss_weight(name: str, value: Any) -> float:
     return float(value)
 
 
+#: The motion levels a gate target may name (x_m^0 .. x_m^3).
+GATE_LEVELS = ("0", "1", "2", "3")
+
+
+def _gate_targets(value: Any) -> dict[str, dict[str, float]]:
+    """``gate_targets`` checked: {noise level: {motion level: gain in [0, 2)}}, in NOISE_LEVELS and level order."""
+    shape = "{noise level: {motion level '0'..'3': gain in [0, 2)}}"
+    if not isinstance(value, dict) or not value:
+        raise InputError(f"gate_targets: expected {shape} with at least one level, got {value!r}")
+    bad = sorted(set(value) - set(NOISE_LEVELS))
+    if bad:
+        raise InputError(f"gate_targets: unknown noise levels {bad}; choose from {', '.join(NOISE_LEVELS)}")
+    out: dict[str, dict[str, float]] = {}
+    for noise in (n for n in NOISE_LEVELS if n in value):
+        gains = value[noise]
+        if not isinstance(gains, dict) or not gains:
+            raise InputError(f"gate_targets[{noise!r}]: expected {{motion level: gain}} with at least one level, "
+                             f"got {gains!r}")
+        levels = {str(k): v for k, v in gains.items()}
+        bad = sorted(set(levels) - set(GATE_LEVELS))
+        if bad:
+            raise InputError(f"gate_targets[{noise!r}]: unknown motion levels {bad}; choose from "
+                             f"{', '.join(GATE_LEVELS)} (x_m^0 .. x_m^3)")
+        for k, v in levels.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= float(v) < 2.0:
+                raise InputError(f"gate_targets[{noise!r}][{k!r}]: expected a gain in [0, 2) (the gate's range), "
+                                 f"got {v!r}")
+        out[noise] = {k: float(levels[k]) for k in GATE_LEVELS if k in levels}
+    return out
+
+
 @dataclass(frozen=True)
 class WindowData:
     """Single simulated windows (feed-forward networks), and how they are scored.
@@ -219,6 +250,17 @@ class WindowData:
         stream of their own, and every other draw of the cell is as it would be with the photograph, so
         a shard with the fraction differs from one without only in those pictures. 0 to 1; default 0
         (earlier specs and their shard keys mean 0).
+    gate_targets : {noise level: {motion level: gain}} or None
+        Fusion networks with a motion gate (``motion_gate`` ``"stats"`` or ``"stats-local"``): targets for
+        the gate's per-image gains on the windows of the named sensor-noise levels (each training
+        window's own level), the motion levels named ``"0"`` to ``"3"`` (x_m^0 .. x_m^3), each gain in
+        [0, 2) (1 leaves a level as it is, 0 shuts it). Each fusion step adds ``gate_target_weight`` *
+        the mean over the (crop, level) pairs with a target of ``(g - target)^2``. The gate still reads
+        only the representations' statistics, so at inference it must tell the noise level from the
+        events themselves; the supervision says what to do with it (for instance: no fine motion
+        features under heavy noise, where they add structure that is not in the scene). Default None.
+    gate_target_weight : float
+        The weight of the ``gate_targets`` term; > 0 with ``gate_targets``, 0 (the default) without.
     """
 
     kind: ClassVar[str] = "windows"
@@ -250,6 +292,8 @@ class WindowData:
     sweep_scenes: bool = False
     sweep_scene_weights: tuple[float, float, float, float] | None = None
     broad_fraction: float = 0.0
+    gate_targets: dict[str, dict[str, float]] | None = None
+    gate_target_weight: float = 0.0
 
     #: What ``spike_floor_terms`` may be.
     FLOOR_TERMS: ClassVar[tuple[str, ...]] = ("both", "ssim")
@@ -301,6 +345,11 @@ class WindowData:
                                  f"{', '.join(NOISE_LEVELS)}")
             put(self, "spike_floor_noise_weights",
                 {k: _loss_weight(f"spike_floor_noise_weights[{k!r}]", w[k]) for k in NOISE_LEVELS if k in w})
+        put(self, "gate_target_weight", _loss_weight("gate_target_weight", self.gate_target_weight))
+        if self.gate_targets is not None:
+            put(self, "gate_targets", _gate_targets(self.gate_targets))
+        if (self.gate_targets is None) != (self.gate_target_weight == 0.0):
+            raise InputError("gate_targets and gate_target_weight: give both (targets and a weight > 0) or neither")
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

@@ -335,6 +335,9 @@ class WindowTask:
       ``w_i * relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss (its SSIM
       loss alone with ``spike_floor_terms="ssim"``) and ``w_i`` the weight of crop i's noise level
       (``spike_floor_weight`` for the levels not named).
+    * **gate targets**: with ``gate_targets``, each fusion step also adds ``gate_target_weight`` * the
+      mean squared difference between the motion gate's gains and the targets of each crop's noise
+      level, over the (crop, level) pairs that have one (the gains captured from the step's own forward).
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -362,6 +365,9 @@ class WindowTask:
                         if self.data.spike_floor_terms != "both" else [])
         if fusion_only and not self.fusion:
             raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
+        if self.data.gate_targets is not None and not hasattr(self.module, "motion_gate"):
+            raise InputError("gate_targets: the network has no motion gate to supervise (a fusion network with "
+                             "params motion_gate 'stats' or 'stats-local')")
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
             raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")
@@ -434,6 +440,23 @@ class WindowTask:
             return data.spike_floor_weight or None
         w = [data.spike_floor_noise_weights.get(level, data.spike_floor_weight) for level in self.noise_levels(step)]
         return torch.tensor(w, dtype=torch.float32, device=self.device) if any(w) else None
+
+    def gate_targets(self, step: int) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """``gate_targets`` for ``step``'s batch as ``(target, mask)``, each (B, 4) in the gate's order
+        (x_m^3, x_m^2, x_m^1, x_m^0) on the device, mask 1 where a crop's noise level names a target for
+        that level; None without targets or where no crop of the batch has one."""
+        targets = self.data.gate_targets
+        if targets is None:
+            return None
+        value = torch.zeros(self.spec.batch, 4)
+        mask = torch.zeros(self.spec.batch, 4)
+        for i, level in enumerate(self.noise_levels(step)):
+            for name, gain in targets.get(level, {}).items():
+                column = 3 - int(name)  # the gate lists x_m^3 first
+                value[i, column], mask[i, column] = gain, 1.0
+        if not mask.any():
+            return None
+        return value.to(self.device), mask.to(self.device)
 
     def batch(self, step: int) -> tuple[list[torch.Tensor], torch.Tensor]:
         """The inputs and targets of ``step`` (deterministic from the seed and the step), on the CPU."""
@@ -532,9 +555,22 @@ class WindowTask:
         inputs, target = self.batch(step)
         t_data = time.perf_counter() - t0
         inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
-        with autocast():
-            pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
+        supervised = self.gate_targets(step) if variant == "fusion" else None
+        gains: list[torch.Tensor] = []
+        hook = (self.module.motion_gate.register_forward_hook(lambda _m, _i, out: gains.append(out))
+                if supervised is not None else None)
+        try:
+            with autocast():
+                pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
+        finally:
+            if hook is not None:
+                hook.remove()
         loss, parts = self.loss(pred, target)
+        if supervised is not None:
+            value, mask = supervised
+            miss = ((gains[0].float() - value).square() * mask).sum() / mask.sum()
+            loss = loss + self.data.gate_target_weight * miss
+            parts["gate_target"] = miss.item()
         weights = self.floor_weights(step) if variant == "fusion" else None
         if weights is not None:
             with torch.no_grad(), autocast():

@@ -667,6 +667,68 @@ def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_pa
     assert checked > 0  # (the term is tested where it is not 0)
 
 
+def test_gate_targets_add_the_mean_squared_miss_of_the_named_gains(tmp_path, one_torch_thread):
+    """gate_targets: each fusion step adds w * the mean of (g - target)^2 over the (crop, motion level)
+    pairs whose crop's noise level names a target, g the motion gate's gains for that crop (recomputed
+    here from the gate itself on the step's inputs); spike-only steps add nothing. Networks without a
+    gate, bad targets and a missing weight are refused by name; the spec round-trips (also from the
+    flag) and the shard key does not change."""
+    from neuspike.methods import create
+    from neuspike.train.__main__ import _gate_targets
+    from neuspike.train.method import training_method
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    targets = {"none": {"3": 0.5}, "small": {"2": 0.25}, "medium": {"1": 0.2, "0": 1.5}, "high": {"1": 0.0}}
+    assert _gate_targets("none:3=0.5,small:2=0.25,medium:1=0.2,medium:0=1.5,high:1=0") == targets
+    with pytest.raises(InputError, match="--gate-targets"):
+        _gate_targets("high=0")
+    with pytest.raises(InputError, match="give both"):
+        WindowData(gate_targets=targets)
+    with pytest.raises(InputError, match="unknown motion levels"):
+        WindowData(gate_targets={"high": {"4": 0.0}}, gate_target_weight=1.0)
+    with pytest.raises(InputError, match=r"gain in \[0, 2\)"):
+        WindowData(gate_targets={"high": {"1": 2.0}}, gate_target_weight=1.0)
+    on = dict(gate_targets=targets, gate_target_weight=2.5)
+    assert WindowData(**on).key(0) == WindowData().key(0)
+    no_gate = TrainSpec(data=WindowData(**on), params={"motion_gate": "none"})
+    for network in (create("neuspike-net-spike"), training_method(no_gate)):
+        with pytest.raises(InputError, match="no motion gate"):
+            WindowTask(no_gate, network)
+    small = dict(batch=4, train_items=8, noise_levels=("none", "small", "medium", "high"),
+                 params={"motion_gate": "stats"})
+    spec = tiny_spec(tmp_path, **on, **small)
+    assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task, module = trainer.task, trainer.module
+    plain = WindowTask(tiny_spec(tmp_path, **small), trainer.method)
+    plain.train_paths = task.train_paths
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # a fresh gate gives 1 everywhere: move its weights so the gains differ per crop
+        for p in module.motion_gate.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=gen))
+    order = {"3": 0, "2": 1, "1": 2, "0": 3}  # the gate lists x_m^3 first
+    steps = list(range(12))
+    assert {task.step_variant(k) for k in steps} == {"fusion", "spike"}
+    seen = set()
+    for step in steps:
+        with torch.no_grad():
+            loss, parts = task.step_loss(step, trainer.autocast)
+            base, _ = plain.step_loss(step, trainer.autocast)
+            inputs, _ = task.batch(step)
+            gains = module.motion_gate(module._split(inputs[0])[0], inputs[1])
+        if task.step_variant(step) == "spike":
+            assert "gate_target" not in parts and float(loss) == float(base)
+            continue
+        misses = [(float(gains[i, order[k]]) - t) ** 2
+                  for i, level in enumerate(task.noise_levels(step)) for k, t in targets[level].items()]
+        seen.update(task.noise_levels(step))
+        assert parts["gate_target"] == pytest.approx(sum(misses) / len(misses), rel=1e-5)
+        assert float(loss - base) == pytest.approx(2.5 * sum(misses) / len(misses), rel=1e-4, abs=1e-6)
+    assert len(seen) >= 2  # (crops of several levels, so the per-crop mapping is exercised)
+
+
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
     """train_parts='motion' trains only the motion path: every other parameter (so the spike-only variant)
     ends as init_from gave it, the motion parameters move; it needs init_from and a fusion network."""
