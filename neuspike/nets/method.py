@@ -136,7 +136,9 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``"none"`` (the paper's), ``"stats"``: gains on the motion features from the
         representations' statistics (:class:`~neuspike.nets.network.MotionGate`), or ``"stats-local"``:
         those gains times per-pixel maps from the events' local coherence
-        (:class:`~neuspike.nets.network.LocalGate`); fusion network only.
+        (:class:`~neuspike.nets.network.LocalGate`), or ``"stats-noise"``: those gains times per-image
+        gains that also read quantiles of per-pixel distributions (:class:`~neuspike.nets.network.NoiseGate`);
+        fusion network only.
     transformer : str
         ``"fixed"`` (default; the shipped weights) or ``"learned"``: a learned full-resolution module on
         each representation before its encoder (:class:`~neuspike.nets.network.InputTransformer`).

@@ -56,6 +56,17 @@ Motion gate (``motion_gate``):
   keep the other. Its last layer starts at zero (``p = 1``), so ``"stats"`` weights load
   (``STARTS_AS_IDENTITY``) and compute exactly what they computed.
 
+* ``"stats-noise"``: the four gains of ``"stats"`` times four more from :class:`NoiseGate`, which
+  reads the same 128 statistics and 20 quantiles of per-pixel distributions (on every 4th row and
+  column): log(eps + mean_c x^2) of the events, the same of box3(x), their difference (each pixel's
+  coherence), and log(eps + mean_c (s - box3 s)^2) of the spikes (each pixel's fine detail, where
+  the spike fixed-pattern noise shows), each at the 10, 25, 50, 75 and 90 % quantiles. Averages over
+  the image mix a few strong edges with the flat background; the quantiles see the background,
+  where sensor noise is. On stage 38's training windows a 32-unit MLP told the high noise level
+  from the others on 98.7 % of held-out windows with both sets, 91.7 % with the 128 statistics
+  alone. Its last layer starts at zero (gains 1), so ``"stats"`` weights load and compute exactly
+  what they computed; it is the part that the trainer's ``gate_targets`` supervise where present.
+
 Input transformers (``transformer``; the paper's T_spike and T_event are learned modules of unknown form):
 
 * ``"fixed"`` (default): the representations enter the encoders and the input-level skip as computed
@@ -118,7 +129,8 @@ from neuspike.nets.fusion import make_fusion
 from neuspike.nets.representations import KEY_CHANNELS
 from neuspike.nn.blocks import ConvNormReLU, NormResidualBlock, UpConvNormReLU
 
-__all__ = ["HEADS", "InputTransformer", "LocalGate", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "PAPER_PARAMETERS",
+__all__ = ["HEADS", "InputTransformer", "LocalGate", "MOTION_GATES", "MotionGate", "NeuSpikeNet", "NoiseGate",
+           "PAPER_PARAMETERS",
            "KEY_ESTIMATES", "KeyRefine", "SUPPORT_CUES", "SupportCue", "TRANSFORMERS", "pad_to_multiple"]
 
 #: The supplement's parameter count of the fusion network.
@@ -129,7 +141,7 @@ MULTIPLE = 8
 #: The prediction heads (module docstring).
 HEADS = ("tanh", "support", "support-count")
 #: The motion gates (module docstring).
-MOTION_GATES = ("none", "stats", "stats-local")
+MOTION_GATES = ("none", "stats", "stats-local", "stats-noise")
 #: The input transformers (module docstring).
 TRANSFORMERS = ("fixed", "learned")
 #: The support head's cues (module docstring).
@@ -255,6 +267,50 @@ class LocalGate(nn.Module):
                                   for level in range(1, cls.LEVELS)]
 
 
+class NoiseGate(nn.Module):
+    """The ``"stats-noise"`` gains (module docstring): (spikes, events) (B, C, H, W) before padding ->
+    (B, 4) in (0, 2), in :class:`MotionGate`'s order (x_m^3 first). Exactly 1 at construction."""
+
+    LEVELS = 4
+    #: The quantiles of each per-pixel distribution.
+    QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
+    #: The distributions are read on every STRIDE-th row and column.
+    STRIDE = 4
+    EPS = 1e-3
+
+    def __init__(self, in_channels: int, hidden: int = 32) -> None:
+        super().__init__()
+        inputs = 4 * in_channels + 4 * len(self.QUANTILES)
+        self.mlp = nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, self.LEVELS))
+        nn.init.zeros_(self.mlp[2].weight)
+        nn.init.zeros_(self.mlp[2].bias)
+
+    @classmethod
+    def statistics(cls, spikes: torch.Tensor, events: torch.Tensor, boxed: torch.Tensor | None = None
+                   ) -> torch.Tensor:
+        """(B, C, H, W) x2 -> (B, 4C + 20): :meth:`MotionGate.statistics`, then the quantiles of the
+        events' energy, of their 3x3 mean's energy, of the difference of the two logarithms, and of
+        the spikes' detail energy (module docstring). ``boxed``: ``box3(events)`` in float32."""
+        spikes, events = spikes.float(), events.float()
+        boxed = MotionGate.box3(events) if boxed is None else boxed
+        base = MotionGate.statistics(spikes, events, boxed)
+        s = cls.STRIDE
+        detail = (spikes - MotionGate.box3(spikes)).square().mean(dim=1)
+
+        def log_energy(x: torch.Tensor, mean_over_channels: bool = True) -> torch.Tensor:
+            e = x.square().mean(dim=1) if mean_over_channels else x
+            return torch.log(cls.EPS + e[:, ::s, ::s]).flatten(1)
+
+        energy, coherent = log_energy(events), log_energy(boxed)
+        q = torch.tensor(cls.QUANTILES, device=events.device)
+        parts = [torch.quantile(v, q, dim=1).T
+                 for v in (energy, coherent, coherent - energy, log_energy(detail, False))]
+        return torch.cat([base, *parts], dim=1)
+
+    def forward(self, spikes: torch.Tensor, events: torch.Tensor, boxed: torch.Tensor | None = None) -> torch.Tensor:
+        return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events, boxed)))
+
+
 class InputTransformer(nn.Module):
     """A learned T: (B, C, H, W) -> (B, C, H, W), ``x + conv1x1(relu(conv3x3(x)))``; the identity at
     construction (the 1x1 layer is zero)."""
@@ -344,7 +400,8 @@ class NeuSpikeNet(nn.Module):
     head : str
         The prediction head, one of :data:`HEADS`.
     motion_gate : str
-        ``"none"``, ``"stats"`` or ``"stats-local"`` (:data:`MOTION_GATES`, module docstring); the spike-only network
+        ``"none"``, ``"stats"``, ``"stats-local"`` or ``"stats-noise"`` (:data:`MOTION_GATES`, module docstring); the
+        spike-only network
         has no motion path and takes ``"none"`` only.
     transformer : str
         ``"fixed"`` or ``"learned"`` (:data:`TRANSFORMERS`, module docstring): a learned
@@ -359,7 +416,7 @@ class NeuSpikeNet(nn.Module):
     """
 
     #: Parts that compute the identity as constructed: weights trained without them start the same network.
-    STARTS_AS_IDENTITY = ("motion_gate.", "local_gate.", "spike_transformer.", "event_transformer.", "support_cue.", "key_refine.")
+    STARTS_AS_IDENTITY = ("motion_gate.", "local_gate.", "noise_gate.", "spike_transformer.", "event_transformer.", "support_cue.", "key_refine.")
 
     def __init__(self, in_channels: int = 32, *, fusion: str = "gate", spike_only: bool = False,
                  event_skip_weight: float = 1.0, head: str = "tanh", motion_gate: str = "none",
@@ -397,10 +454,12 @@ class NeuSpikeNet(nn.Module):
             self.motion = _Encoder(in_channels)
             self.fuse1 = make_fusion(fusion, ENCODER_CHANNELS[0])
             self.fuse2 = make_fusion(fusion, ENCODER_CHANNELS[1])
-            if motion_gate in ("stats", "stats-local"):
+            if motion_gate != "none":
                 self.motion_gate = MotionGate(in_channels)
             if motion_gate == "stats-local":
                 self.local_gate = LocalGate()
+            if motion_gate == "stats-noise":
+                self.noise_gate = NoiseGate(in_channels)
         self.residual = nn.Sequential(NormResidualBlock(ENCODER_CHANNELS[2]), NormResidualBlock(ENCODER_CHANNELS[2]))
         self.up1 = UpConvNormReLU(ENCODER_CHANNELS[2], DECODER_CHANNELS[0])
         self.up2 = UpConvNormReLU(DECODER_CHANNELS[0] + ENCODER_CHANNELS[1], DECODER_CHANNELS[1])
@@ -454,11 +513,14 @@ class NeuSpikeNet(nn.Module):
             return self._decode(t[3], t[2], t[1], t[0], spikes, quantum, (h, w), parts, key)
         m = self.motion(pad_to_multiple(self._transform("event_transformer", events)))
         if hasattr(self, "motion_gate"):
-            boxed = MotionGate.box3(events.float()) if hasattr(self, "local_gate") else None
+            shared = hasattr(self, "local_gate") or hasattr(self, "noise_gate")
+            boxed = MotionGate.box3(events.float()) if shared else None
             g = (self.motion_gate(spikes, events) if boxed is None else self.motion_gate(spikes, events, boxed))
+            if hasattr(self, "noise_gate"):
+                g = g * self.noise_gate(spikes, events, boxed)
             g = g.to(m[3].dtype)[:, :, None, None]
             m = [g[:, 3:4] * m[0], g[:, 2:3] * m[1], g[:, 1:2] * m[2], g[:, 0:1] * m[3]]
-            if boxed is not None:
+            if hasattr(self, "local_gate"):
                 local = LocalGate.level_gains(self.local_gate(events, boxed), m[0].shape[-2:])
                 m = [p.to(x.dtype) * x for p, x in zip(local, m)]
         return self._decode(t[3] + m[3], self.fuse2(t[2], m[2]), self.fuse1(t[1], m[1]),

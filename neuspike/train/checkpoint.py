@@ -45,7 +45,7 @@ SPEC, CHECKPOINT, LOG = "spec.json", "checkpoint.pt", "train_log.csv"
 CHECKPOINT_FORMAT = 2
 LOG_COLUMNS = ("step", "kind", "variant", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds", "samples_per_s",
                "wall_s", "val_l1", "val_psnr", "val_ssim", "val_ssim_last", "support_l1",
-               "edge_ssim_loss", "spike_floor")
+               "edge_ssim_loss", "spike_floor", "gate_target")
 #: Validation scores of the log (a row of the sequence trainer held them beside the step's loss).
 _VAL_COLUMNS = ("val_l1", "val_psnr", "val_ssim", "val_ssim_last")
 
@@ -205,7 +205,8 @@ def trim_log(out_dir: str | os.PathLike, step: int) -> None:
 
 
 def append_log(out_dir: str | os.PathLike, row: Mapping[str, Any]) -> None:
-    """Append one row (header first in a new log)."""
+    """Append one row (header first in a new log; a log begun before a column was added is rewritten in
+    the current columns by :func:`trim_log` when its run starts)."""
     path = Path(out_dir) / LOG
     new = not path.exists()
     with open(path, "a", newline="") as f:

@@ -251,14 +251,15 @@ class WindowData:
         a shard with the fraction differs from one without only in those pictures. 0 to 1; default 0
         (earlier specs and their shard keys mean 0).
     gate_targets : {noise level: {motion level: gain}} or None
-        Fusion networks with a motion gate (``motion_gate`` ``"stats"`` or ``"stats-local"``): targets for
-        the gate's per-image gains on the windows of the named sensor-noise levels (each training
-        window's own level), the motion levels named ``"0"`` to ``"3"`` (x_m^0 .. x_m^3), each gain in
-        [0, 2) (1 leaves a level as it is, 0 shuts it). Each fusion step adds ``gate_target_weight`` *
-        the mean over the (crop, level) pairs with a target of ``(g - target)^2``. The gate still reads
-        only the representations' statistics, so at inference it must tell the noise level from the
-        events themselves; the supervision says what to do with it (for instance: no fine motion
-        features under heavy noise, where they add structure that is not in the scene). Default None.
+        Fusion networks with a motion gate (``motion_gate`` other than ``"none"``): targets for the
+        per-image gains of the noise gate (``"stats-noise"``), or else of the motion gate, on the
+        windows of the named sensor-noise levels (each training window's own level), the motion levels
+        named ``"0"`` to ``"3"`` (x_m^0 .. x_m^3), each gain in [0, 2) (1 leaves a level as it is, 0
+        shuts it). Each fusion step adds ``gate_target_weight`` * the mean over the (crop, level)
+        pairs with a target of ``(g - target)^2``. The gate still reads only the representations'
+        statistics, so at inference it must tell the noise level from the data themselves; the
+        supervision says what to do with it (for instance: no fine motion features under heavy noise,
+        where they add structure that is not in the scene). Default None.
     gate_target_weight : float
         The weight of the ``gate_targets`` term; > 0 with ``gate_targets``, 0 (the default) without.
     """

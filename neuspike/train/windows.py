@@ -290,7 +290,7 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 
 
 #: Module tensors only the fusion network has (left out of the spike-only export).
-MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "local_gate.", "event_transformer.")
+MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "local_gate.", "noise_gate.", "event_transformer.")
 
 
 #: Share of a crop's pixels that :func:`edge_mask` marks (the fast-motion report's edge share).
@@ -337,7 +337,8 @@ class WindowTask:
       (``spike_floor_weight`` for the levels not named).
     * **gate targets**: with ``gate_targets``, each fusion step also adds ``gate_target_weight`` * the
       mean squared difference between the motion gate's gains and the targets of each crop's noise
-      level, over the (crop, level) pairs that have one (the gains captured from the step's own forward).
+      level, over the (crop, level) pairs that have one (the gains captured from the step's own forward;
+      the noise gate's where the network has one, ``motion_gate="stats-noise"``, else the motion gate's).
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -557,7 +558,8 @@ class WindowTask:
         inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
         supervised = self.gate_targets(step) if variant == "fusion" else None
         gains: list[torch.Tensor] = []
-        hook = (self.module.motion_gate.register_forward_hook(lambda _m, _i, out: gains.append(out))
+        supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
+        hook = (supervised_gate.register_forward_hook(lambda _m, _i, out: gains.append(out))
                 if supervised is not None else None)
         try:
             with autocast():
