@@ -259,6 +259,69 @@ def test_local_gate_starts_as_the_stats_gate_and_loads_its_weights(one_torch_thr
         NeuSpikeNet(spike_only=True, motion_gate="stats-local")
 
 
+def test_noise_gate_starts_as_the_stats_gate_and_multiplies_its_gains(one_torch_thread):
+    """``"stats-noise"`` adds an MLP on 4C + 20 inputs whose last layer is zero: ``"stats"`` weights load
+    (``may_lack``) and give the same image bit for bit (a frame whose sides are not multiples of 8); a
+    noise gain of 0 at every level is the spike-only network whatever the stats gate says."""
+    from neuspike.methods.weights import load_state_strict
+    from neuspike.nets.network import NoiseGate
+
+    torch.manual_seed(8)
+    stats = NeuSpikeNet(head="support-count", motion_gate="stats").eval()
+    with torch.no_grad():  # a stats gate that is not the identity, so the comparison covers it
+        stats.motion_gate.mlp[2].bias.copy_(torch.tensor([0.3, -0.2, 0.1, -0.4]))
+    noisy = NeuSpikeNet(head="support-count", motion_gate="stats-noise").eval()
+    extra = sum(p.numel() for p in noisy.parameters()) - sum(p.numel() for p in stats.parameters())
+    assert extra == (4 * 32 + 4 * 5) * 32 + 32 + 32 * 4 + 4
+    load_state_strict(noisy, stats.state_dict(), "stats", may_lack=noisy.STARTS_AS_IDENTITY)
+    x, m, q = torch.rand(2, 32, 27, 43), torch.randn(2, 32, 27, 43), torch.full((2, 1, 1, 1), 0.02)
+    with torch.no_grad():
+        assert torch.equal(noisy.noise_gate(x, m), torch.ones(2, 4))
+        assert torch.equal(noisy(x, m, q), stats(x, m, q))
+        noisy.noise_gate.mlp[2].bias.fill_(-1e4)  # the noise gate shuts every level
+        assert torch.allclose(noisy(x, m, q), noisy.forward_texture_only(x, q), atol=1e-6)
+    assert NoiseGate.statistics(x, m).shape == (2, 4 * 32 + 20)
+    with pytest.raises(InputError, match="spike-only"):
+        NeuSpikeNet(spike_only=True, motion_gate="stats-noise")
+
+
+def test_noise_gate_quantiles_are_those_of_the_strided_per_pixel_energies():
+    """The 20 numbers after the stats gate's 128 are, in order, the 10-90 % quantiles (NumPy's linear rule)
+    of log(eps + e) over every 4th row and column, e the events' channel-mean energy, the same for their
+    3x3 mean, the difference of those two logarithms, and the spikes' channel-mean (s - box3 s)^2, all
+    computed here with NumPy; dense independent events sit at the closed-form coherence of noise."""
+    import numpy as np
+
+    from neuspike.nets.network import MotionGate, NoiseGate
+
+    gen = torch.Generator().manual_seed(5)
+    spikes, events = torch.rand(1, 3, 21, 34, generator=gen), torch.randn(1, 3, 21, 34, generator=gen)
+    got = NoiseGate.statistics(spikes, events)[0].numpy()
+    assert np.allclose(got[:12], MotionGate.statistics(spikes, events)[0].numpy())
+    s, eps, qs = NoiseGate.STRIDE, NoiseGate.EPS, list(NoiseGate.QUANTILES)
+
+    def box3(a):  # (C, H, W): mean over the neighbours inside the image
+        c, h, w = a.shape
+        out = np.zeros_like(a)
+        for i in range(h):
+            for j in range(w):
+                out[:, i, j] = a[:, max(i - 1, 0):i + 2, max(j - 1, 0):j + 2].mean(axis=(1, 2))
+        return out
+
+    e, sp = events[0].double().numpy(), spikes[0].double().numpy()
+    energy = np.log(eps + (e ** 2).mean(0)[::s, ::s]).ravel()
+    coherent = np.log(eps + (box3(e) ** 2).mean(0)[::s, ::s]).ravel()
+    detail = np.log(eps + ((sp - box3(sp)) ** 2).mean(0)[::s, ::s]).ravel()
+    want = np.concatenate([np.quantile(v, qs) for v in (energy, coherent, coherent - energy, detail)])
+    assert np.allclose(got[12:], want, atol=1e-5)
+    # the median coherence: 0 for events that cover a region alike; about log(1/9) for dense independent
+    # +-1 events (the 3x3 mean of nine of them has mean square 1/9), averaged over eight channels
+    region = torch.ones(1, 8, 64, 64)
+    noise = torch.randint(0, 2, (1, 8, 64, 64), generator=gen).float() * 2 - 1
+    median = [float(NoiseGate.statistics(torch.zeros_like(x), x)[0, 32 + 12]) for x in (region, noise)]
+    assert median[0] == 0.0 and median[1] == pytest.approx(math.log(1 / 9), abs=0.3)
+
+
 def test_local_gate_statistics_tell_isolated_events_from_edges_and_regions():
     """At the centre of an analytic pattern of unit events (two channels alike), the energy is the 3x3
     mean of x^2 and the coherence the 3x3 mean of box3(x)^2 over it: an isolated event 1/9 and

@@ -729,6 +729,31 @@ def test_gate_targets_add_the_mean_squared_miss_of_the_named_gains(tmp_path, one
     assert len(seen) >= 2  # (crops of several levels, so the per-crop mapping is exercised)
 
 
+def test_gate_targets_supervise_the_noise_gate_where_the_network_has_one(tmp_path, one_torch_thread):
+    """With motion_gate 'stats-noise' the term is the miss of the noise gate's gains (not the stats gate's):
+    recomputed here from the noise gate on the step's inputs, with both gates moved so they differ."""
+    targets = {"none": {"1": 1.0}, "small": {"1": 1.0}, "medium": {"1": 0.5}, "high": {"1": 0.0}}
+    spec = tiny_spec(tmp_path, gate_targets=targets, gate_target_weight=1.0, batch=4, train_items=8,
+                     noise_levels=("none", "small", "medium", "high"), params={"motion_gate": "stats-noise"})
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task, module = trainer.task, trainer.module
+    gen = torch.Generator().manual_seed(1)
+    with torch.no_grad():
+        for p in [*module.motion_gate.parameters(), *module.noise_gate.parameters()]:
+            p.add_(0.3 * torch.randn(p.shape, generator=gen))
+    step = next(k for k in range(20) if task.step_variant(k) == "fusion")
+    with torch.no_grad():
+        _, parts = task.step_loss(step, trainer.autocast)
+        inputs, _ = task.batch(step)
+        spikes = module._split(inputs[0])[0]
+        noise, stats = module.noise_gate(spikes, inputs[1]), module.motion_gate(spikes, inputs[1])
+    want = [targets[level]["1"] for level in task.noise_levels(step)]
+    miss = float((noise[:, 2] - torch.tensor(want)).square().mean())
+    assert parts["gate_target"] == pytest.approx(miss, rel=1e-5)
+    assert parts["gate_target"] != pytest.approx(float((stats[:, 2] - torch.tensor(want)).square().mean()), rel=1e-3)
+
+
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
     """train_parts='motion' trains only the motion path: every other parameter (so the spike-only variant)
     ends as init_from gave it, the motion parameters move; it needs init_from and a fusion network."""
