@@ -295,17 +295,32 @@ class NoiseGate(nn.Module):
         boxed = MotionGate.box3(events) if boxed is None else boxed
         base = MotionGate.statistics(spikes, events, boxed)
         s = cls.STRIDE
-        detail = (spikes - MotionGate.box3(spikes)).square().mean(dim=1)
 
-        def log_energy(x: torch.Tensor, mean_over_channels: bool = True) -> torch.Tensor:
-            e = x.square().mean(dim=1) if mean_over_channels else x
-            return torch.log(cls.EPS + e[:, ::s, ::s]).flatten(1)
+        def log_energy(x: torch.Tensor) -> torch.Tensor:  # (B, H', W') -> (B, H' W')
+            return torch.log(cls.EPS + x).flatten(1)
 
-        energy, coherent = log_energy(events), log_energy(boxed)
+        energy = log_energy(events[..., ::s, ::s].square().mean(dim=1))
+        coherent = log_energy(boxed[..., ::s, ::s].square().mean(dim=1))
+        detail = log_energy((spikes[..., ::s, ::s] - cls.strided_box3(spikes)).square().mean(dim=1))
         q = torch.tensor(cls.QUANTILES, device=events.device)
-        parts = [torch.quantile(v, q, dim=1).T
-                 for v in (energy, coherent, coherent - energy, log_energy(detail, False))]
+        parts = [torch.quantile(v, q, dim=1).T for v in (energy, coherent, coherent - energy, detail)]
         return torch.cat([base, *parts], dim=1)
+
+    @classmethod
+    def strided_box3(cls, x: torch.Tensor) -> torch.Tensor:
+        """:meth:`MotionGate.box3` of ``x`` (B, C, H, W) at every STRIDE-th row and column only
+        (B, C, ceil(H / STRIDE), ceil(W / STRIDE)): nine strided views of the zero-padded input summed,
+        over the number of neighbours inside the image."""
+        s = cls.STRIDE
+        h, w = x.shape[-2:]
+        p = F.pad(x, (1, 1, 1, 1))
+        total = sum(p[..., di:di + h:s, dj:dj + w:s] for di in range(3) for dj in range(3))
+
+        def count(n: int) -> torch.Tensor:  # neighbours inside the image along one axis, at 0, s, 2s, ...
+            i = torch.arange(0, n, s, device=x.device)
+            return 3.0 - (i == 0).float() - (i == n - 1).float()
+
+        return total / (count(h)[:, None] * count(w)[None, :])
 
     def forward(self, spikes: torch.Tensor, events: torch.Tensor, boxed: torch.Tensor | None = None) -> torch.Tensor:
         return 2.0 * torch.sigmoid(self.mlp(self.statistics(spikes, events, boxed)))

@@ -314,6 +314,9 @@ def test_noise_gate_quantiles_are_those_of_the_strided_per_pixel_energies():
     detail = np.log(eps + ((sp - box3(sp)) ** 2).mean(0)[::s, ::s]).ravel()
     want = np.concatenate([np.quantile(v, qs) for v in (energy, coherent, coherent - energy, detail)])
     assert np.allclose(got[12:], want, atol=1e-5)
+    for hw in ((21, 34), (27, 43), (4, 8), (5, 9), (1, 1)):  # the strided 3x3 mean: the full one's strided rows
+        field = torch.rand(2, 3, *hw, generator=gen)
+        assert torch.allclose(NoiseGate.strided_box3(field), MotionGate.box3(field)[..., ::s, ::s], atol=1e-6)
     # the median coherence: 0 for events that cover a region alike; about log(1/9) for dense independent
     # +-1 events (the 3x3 mean of nine of them has mean square 1/9), averaged over eight channels
     region = torch.ones(1, 8, 64, 64)
