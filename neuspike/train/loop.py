@@ -108,8 +108,14 @@ class Trainer:
         if lacked:  # new parts start from nothing: they learn at new_parts_lr_scale times the rate
             groups.append({"params": [p for n, p in named if n in lacked], "lr_scale": spec.new_parts_lr_scale})
         for prefix, scale in spec.part_lr_scales.items():
-            if prefix in scaled.values():  # (a prefix whose parameters an earlier one took has no group)
-                groups.append({"params": [p for n, p in named if scaled.get(n) == prefix], "lr_scale": scale})
+            if prefix not in scaled.values():  # (a prefix whose parameters an earlier one took has no group)
+                continue
+            part = [p for n, p in named if scaled.get(n) == prefix]
+            if scale == 0:  # held as init_from gave it
+                for p in part:
+                    p.requires_grad_(False)
+            else:
+                groups.append({"params": part, "lr_scale": scale})
         if spec.optimizer == "adamw":
             self.optim = torch.optim.AdamW(groups, lr=spec.lr, weight_decay=spec.weight_decay)
         else:

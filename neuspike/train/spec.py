@@ -580,8 +580,9 @@ class TrainSpec:
         ``{name prefix: multiple}``: the parameters whose names start with a prefix learn at that
         multiple of the schedule's rate (the first prefix that matches; parts the ``init_from`` file
         lacked keep ``new_parts_lr_scale``). A small part, such as NeuSpike-Net's motion gate, can so
-        move as far as the rest in a short fine-tuning run. Every prefix must name a parameter that
-        learns. Default ``{}`` (earlier specs mean none).
+        move as far as the rest in a short fine-tuning run; a multiple of 0 holds the part as
+        ``init_from`` gave it (no gradient, no optimiser state). Every prefix must name a parameter that
+        would learn. Default ``{}`` (earlier specs mean none).
     export : bool
         Also write the best weights into the package's ``neuspike/trained/``.
     export_dir : str or None
@@ -643,8 +644,8 @@ class TrainSpec:
         for prefix, scale in self.part_lr_scales.items():
             if not isinstance(prefix, str) or not prefix:
                 raise InputError(f"part_lr_scales: expected parameter name prefixes, got {prefix!r}")
-            if isinstance(scale, bool) or not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
-                raise InputError(f"part_lr_scales[{prefix!r}]: expected a positive number, got {scale!r}")
+            if isinstance(scale, bool) or not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale >= 0):
+                raise InputError(f"part_lr_scales[{prefix!r}]: expected a number >= 0, got {scale!r}")
         put(self, "part_lr_scales", {k: float(v) for k, v in self.part_lr_scales.items()})
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")

@@ -33,8 +33,11 @@ NOISE = ("none", "small", "medium", "high")
 def gains(weights: list[str | None], samples: list) -> None:
     from neuspike.methods import create
 
+    from fullsize_check import trained_design  # beside this script: Python puts its folder on the path
+
     for folder in weights:
-        method = create("neuspike-net", weights_dir=folder, precision="float32")
+        method = create("neuspike-net", weights_dir=folder, precision="float32",
+                        **trained_design(folder, "neuspike-net"))
         net = method.module.eval()
         if not hasattr(net, "motion_gate"):
             raise SystemExit(f"{folder or 'shipped'}: these weights have no motion gate")

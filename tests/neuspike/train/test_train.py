@@ -786,10 +786,11 @@ def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_
 
 def test_part_lr_scales_give_a_named_part_its_own_multiple_of_the_rate(tmp_path, one_torch_thread):
     """part_lr_scales {prefix: k}: those parameters (and only they) learn at k times the schedule's rate;
-    a prefix that names nothing, or a bad multiple, is refused by name; earlier specs mean none."""
+    a multiple of 0 holds that part bit for bit (no gradient, no group); a prefix that names nothing, or a
+    bad multiple, is refused by name; earlier specs mean none."""
     from neuspike.train.spec import spec_from_dict
 
-    for bad in (0.0, -1.0, float("nan"), True, "2"):
+    for bad in (-1.0, float("nan"), True, "2"):
         with pytest.raises(InputError, match="part_lr_scales"):
             tiny_spec(tmp_path, part_lr_scales={"motion_gate.": bad})
     with pytest.raises(InputError, match="part_lr_scales"):
@@ -811,6 +812,17 @@ def test_part_lr_scales_give_a_named_part_its_own_multiple_of_the_rate(tmp_path,
     assert again.run()["resumed"]  # the optimiser's groups load back from the checkpoint
     for a, b in zip(trainer.optim.param_groups, again.optim.param_groups):
         assert a["lr_scale"] == b["lr_scale"] and len(a["params"]) == len(b["params"])
+    held = tiny_spec(tmp_path / "b", steps=3, params={"motion_gate": "stats"}, part_lr_scales={"motion_gate.": 0.0},
+                     lr=1e-2)
+    trainer = Trainer(held, quiet=True)
+    before = {k: v.clone() for k, v in trainer.module.state_dict().items()}
+    trainer.run()
+    assert len(trainer.optim.param_groups) == 1
+    after = trainer.module.state_dict()
+    for k, v in after.items():
+        if k.startswith("motion_gate."):
+            assert torch.equal(v, before[k]), k
+    assert any(not torch.equal(v, before[k]) for k, v in after.items() if k.startswith("motion."))
 
 
 def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard_keys(tmp_path):
