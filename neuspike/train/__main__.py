@@ -22,7 +22,7 @@ from neuspike.methods.precision import PRECISIONS
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
                "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
                "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights",
-               "broad_fraction", "gate_targets", "gate_target_weight")
+               "broad_fraction", "gate_targets", "gate_target_weight", "gate_forcing")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
@@ -30,7 +30,7 @@ SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_
               "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
               "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "spike_floor_terms",
               "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction", "gate_targets",
-              "gate_target_weight", "size", "view", "length", "kinds",
+              "gate_target_weight", "gate_forcing", "size", "view", "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
@@ -170,6 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as it is, 0 shuts it); e.g. high:1=0,medium:1=0.5 (needs --gate-target-weight)")
     d.add_argument("--gate-target-weight", type=float, metavar="W",
                    help="single windows: weight of the --gate-targets term (the mean squared gain miss; default 0)")
+    d.add_argument("--gate-forcing", action="store_const", const=True, default=None,
+                   help="single windows, with --gate-targets: the training forward uses the targets in place of the "
+                        "supervised gains (the gate still learns from its miss; validation uses its own gains)")
     d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
                    help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
                         "(e.g. 1,1,4,1; default equal)")
@@ -308,7 +311,7 @@ def spec_from_args(args: argparse.Namespace):
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
                  "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
                  "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes",
-                 "broad_fraction", "gate_target_weight"):
+                 "broad_fraction", "gate_target_weight", "gate_forcing"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:

@@ -262,6 +262,11 @@ class WindowData:
         where they add structure that is not in the scene). Default None.
     gate_target_weight : float
         The weight of the ``gate_targets`` term; > 0 with ``gate_targets``, 0 (the default) without.
+    gate_forcing : bool
+        With ``gate_targets``: on the training steps the supervised gate's gains that have a target are
+        replaced by the target itself (the gate still learns from its miss), so the rest of the
+        network trains on the gains the targets say, not on the gate's guesses; validation and
+        inference use the gate's own gains. Default False.
     """
 
     kind: ClassVar[str] = "windows"
@@ -295,6 +300,7 @@ class WindowData:
     broad_fraction: float = 0.0
     gate_targets: dict[str, dict[str, float]] | None = None
     gate_target_weight: float = 0.0
+    gate_forcing: bool = False
 
     #: What ``spike_floor_terms`` may be.
     FLOOR_TERMS: ClassVar[tuple[str, ...]] = ("both", "ssim")
@@ -351,6 +357,10 @@ class WindowData:
             put(self, "gate_targets", _gate_targets(self.gate_targets))
         if (self.gate_targets is None) != (self.gate_target_weight == 0.0):
             raise InputError("gate_targets and gate_target_weight: give both (targets and a weight > 0) or neither")
+        if not isinstance(self.gate_forcing, bool):
+            raise InputError(f"gate_forcing: expected true or false, got {self.gate_forcing!r}")
+        if self.gate_forcing and self.gate_targets is None:
+            raise InputError("gate_forcing: forces the gains to gate_targets; give gate_targets too")
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)

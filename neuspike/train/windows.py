@@ -338,7 +338,8 @@ class WindowTask:
     * **gate targets**: with ``gate_targets``, each fusion step also adds ``gate_target_weight`` * the
       mean squared difference between the motion gate's gains and the targets of each crop's noise
       level, over the (crop, level) pairs that have one (the gains captured from the step's own forward;
-      the noise gate's where the network has one, ``motion_gate="stats-noise"``, else the motion gate's).
+      the noise gate's where the network has one, ``motion_gate="stats-noise"``, else the motion gate's);
+      with ``gate_forcing`` the forward uses the targets in place of those gains.
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -559,8 +560,16 @@ class WindowTask:
         supervised = self.gate_targets(step) if variant == "fusion" else None
         gains: list[torch.Tensor] = []
         supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
-        hook = (supervised_gate.register_forward_hook(lambda _m, _i, out: gains.append(out))
-                if supervised is not None else None)
+        forcing = self.data.gate_forcing
+
+        def capture(_module, _inputs, out: torch.Tensor) -> torch.Tensor | None:
+            gains.append(out)
+            if not forcing:
+                return None
+            value, mask = supervised
+            return torch.where(mask.bool(), value.to(out.dtype), out)  # the rest trains on the targets
+
+        hook = supervised_gate.register_forward_hook(capture) if supervised is not None else None
         try:
             with autocast():
                 pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))

@@ -755,6 +755,55 @@ def test_gate_targets_supervise_the_noise_gate_where_the_network_has_one(tmp_pat
     assert parts["gate_target"] != pytest.approx(float((stats[:, 2] - torch.tensor(want)).square().mean()), rel=1e-3)
 
 
+def test_gate_forcing_trains_the_rest_on_the_targets_and_the_gate_on_its_miss(tmp_path, one_torch_thread):
+    """gate_forcing: the step's image comes from a forward whose supervised gains are the targets (x_m^1
+    here; the other levels the gate's own), rebuilt here by patching the noise gate; the term is still the
+    miss of the gate's own gains, and the gate gets gradient from that term alone on the forced gains.
+    Forcing without targets is refused."""
+    with pytest.raises(InputError, match="gate_forcing"):
+        WindowData(gate_forcing=True)
+    targets = {"none": {"1": 1.0}, "small": {"1": 1.0}, "medium": {"1": 0.5}, "high": {"1": 0.0}}
+    common = dict(batch=4, train_items=8, noise_levels=("none", "small", "medium", "high"),
+                  params={"motion_gate": "stats-noise"})
+    spec = tiny_spec(tmp_path, gate_targets=targets, gate_target_weight=1.0, gate_forcing=True, **common)
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task, module = trainer.task, trainer.module
+    gen = torch.Generator().manual_seed(2)
+    with torch.no_grad():
+        for p in module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    step = next(k for k in range(20) if task.step_variant(k) == "fusion")
+    levels = task.noise_levels(step)
+    want = torch.tensor([targets[level]["1"] for level in levels])
+    loss, parts = task.step_loss(step, trainer.autocast)
+    inputs, target = task.batch(step)
+    with torch.no_grad():
+        own = module.noise_gate(module._split(inputs[0])[0], inputs[1])
+        forced = own.clone()
+        forced[:, 2] = want
+        handle = module.noise_gate.register_forward_hook(lambda _m, _i, _out: forced)
+        try:
+            image = task.forward(inputs, "fusion")
+        finally:
+            handle.remove()
+        main, _ = task.loss(image, target)
+        free, _ = task.loss(task.forward(inputs, "fusion"), target)
+    miss = float((own[:, 2] - want).square().mean())
+    assert parts["gate_target"] == pytest.approx(miss, rel=1e-5)
+    assert float(loss.detach()) == pytest.approx(float(main) + miss, rel=1e-5)
+    assert abs(float(main) - float(free)) > 1e-6  # (forcing changed the image)
+    module.zero_grad()
+    loss.backward()
+    last = module.noise_gate.mlp[2]
+    # the x_m^1 row of the gate's last layer learns from the miss alone: 2 (g - t) g (1 - g / 2) over the batch
+    g = own[:, 2]
+    hidden = torch.relu(module.noise_gate.mlp[0](
+        type(module.noise_gate).statistics(module._split(inputs[0])[0], inputs[1]))).detach()
+    expected = ((2 * (g - want) * g * (1 - g / 2) / len(g))[:, None] * hidden).sum(0)
+    assert torch.allclose(last.weight.grad[2], expected, rtol=1e-4, atol=1e-7)
+
+
 def test_training_the_motion_path_only_holds_the_rest_bit_for_bit(tmp_path, one_torch_thread):
     """train_parts='motion' trains only the motion path: every other parameter (so the spike-only variant)
     ends as init_from gave it, the motion parameters move; it needs init_from and a fusion network."""
