@@ -62,9 +62,9 @@ Motion gate (``motion_gate``):
   coherence), and log(eps + mean_c (s - box3 s)^2) of the spikes (each pixel's fine detail, where
   the spike fixed-pattern noise shows), each at the 10, 25, 50, 75 and 90 % quantiles. Averages over
   the image mix a few strong edges with the flat background; the quantiles see the background,
-  where sensor noise is. On stage 38's training windows a 32-unit MLP told the high noise level
-  from the others on 98.7 % of held-out windows with both sets, 91.7 % with the 128 statistics
-  alone. Its last layer starts at zero (gains 1), so ``"stats"`` weights load and compute exactly
+  where sensor noise is. On stage 38's training windows a 32-unit MLP tells the high noise level
+  from the others on 97.3 % of held-out windows with both sets, 91.7 % with the 128 statistics
+  alone (``reports/neuspike-net/gate_probe.py --separability``). Its last layer starts at zero (gains 1), so ``"stats"`` weights load and compute exactly
   what they computed; it is the part that the trainer's ``gate_targets`` supervise where present.
 
 Input transformers (``transformer``; the paper's T_spike and T_event are learned modules of unknown form):
@@ -416,8 +416,7 @@ class NeuSpikeNet(nn.Module):
         The prediction head, one of :data:`HEADS`.
     motion_gate : str
         ``"none"``, ``"stats"``, ``"stats-local"`` or ``"stats-noise"`` (:data:`MOTION_GATES`, module docstring); the
-        spike-only network
-        has no motion path and takes ``"none"`` only.
+        spike-only network has no motion path and takes ``"none"`` only.
     transformer : str
         ``"fixed"`` or ``"learned"`` (:data:`TRANSFORMERS`, module docstring): a learned
         full-resolution module on each representation before its encoder.
