@@ -367,9 +367,11 @@ class WindowTask:
                         if self.data.spike_floor_terms != "both" else [])
         if fusion_only and not self.fusion:
             raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
-        if self.data.gate_targets is not None and not hasattr(self.module, "motion_gate"):
+        # the gate gate_targets supervise: the noise gate where there is one, else the motion gate
+        self.supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
+        if self.data.gate_targets is not None and self.supervised_gate is None:
             raise InputError("gate_targets: the network has no motion gate to supervise (a fusion network with "
-                             "params motion_gate 'stats' or 'stats-local')")
+                             "params motion_gate 'stats', 'stats-local' or 'stats-noise')")
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
             raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")
@@ -559,7 +561,6 @@ class WindowTask:
         inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
         supervised = self.gate_targets(step) if variant == "fusion" else None
         gains: list[torch.Tensor] = []
-        supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
         forcing = self.data.gate_forcing
 
         def capture(_module, _inputs, out: torch.Tensor) -> torch.Tensor | None:
@@ -569,7 +570,7 @@ class WindowTask:
             value, mask = supervised
             return torch.where(mask.bool(), value.to(out.dtype), out)  # the rest trains on the targets
 
-        hook = supervised_gate.register_forward_hook(capture) if supervised is not None else None
+        hook = self.supervised_gate.register_forward_hook(capture) if supervised is not None else None
         try:
             with autocast():
                 pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
