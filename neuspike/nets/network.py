@@ -64,8 +64,9 @@ Motion gate (``motion_gate``):
   the image mix a few strong edges with the flat background; the quantiles see the background,
   where sensor noise is. On stage 38's training windows a 32-unit MLP tells the high noise level
   from the others on 97.3 % of held-out windows with both sets, 91.7 % with the 128 statistics
-  alone (``reports/neuspike-net/gate_probe.py --separability``). Its last layer starts at zero (gains 1), so ``"stats"`` weights load and compute exactly
-  what they computed; it is the part that the trainer's ``gate_targets`` supervise where present.
+  alone (``reports/neuspike-net/gate_probe.py --separability``). Its last layer starts at zero (gains
+  1), so ``"stats"`` weights load and compute exactly what they computed; it is the part that the
+  trainer's ``gate_targets`` supervise where present.
 
 Input transformers (``transformer``; the paper's T_spike and T_event are learned modules of unknown form):
 
