@@ -31,6 +31,14 @@ History term (``history`` > 0, default 0): the batch's last ``length - length //
 again from a zero state, and ``history * |o_last - o'_last|`` (the mean absolute difference of the
 two passes' last images) is added: an image after a long warm-up should not depend on where the
 history started (a new frame of a stream, a recording cut at any instant). It costs half a pass more.
+
+Empty-window term (``empty`` > 0, default 0): one window without events (all-zero voxels, the crop's
+size) is run from a zero state, and ``empty`` times the image's mean absolute deviation from its own
+mean is added. Without events an image has no structure to show, yet a network whose windows always
+hold events never learns that: its answer to a scene that gives almost none (a still scene, a wide
+uniform region far from any edge, a recording's first window) is whatever pattern its biases and
+zero padding leave, and on a uniform region SSIM's contrast term falls steeply with any such pattern.
+The term says nothing about the image's level. It costs one window more per step.
 """
 
 from __future__ import annotations
@@ -508,6 +516,12 @@ class SequenceTask:
             short = run_sequence(self.module, batch["voxels"][start:], precision=self.precision)
             gap = (outputs[-1].float() - short[-1].float()).abs().mean()
             loss = loss + self.data.history * gap
+        if self.data.empty > 0:
+            blank = torch.zeros((1, 1, *batch["voxels"].shape[2:]), device=self.device)
+            image = run_sequence(self.module, blank, precision=self.precision)[0].float()
+            spread = (image - image.mean()).abs().mean()
+            loss = loss + self.data.empty * spread
+            parts["empty_spread"] = float(spread.detach())
         return loss, {**parts, "variant": "main"}
 
     def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:

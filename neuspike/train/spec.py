@@ -442,7 +442,8 @@ class SequenceData:
     temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``, plus
     ``history`` times the gap between the last image and the same image from a second pass over the
     last ``length - length // 2`` windows started from a zero state (0: off;
-    :mod:`neuspike.train.sequences`).
+    :mod:`neuspike.train.sequences`), plus ``empty`` times the spatial spread of the image that one
+    window without events gives from a zero state (0: off).
     """
 
     kind: ClassVar[str] = "sequences"
@@ -473,6 +474,7 @@ class SequenceData:
     temporal: float = 1.0
     occlusion_alpha: float = 50.0
     history: float = 0.0
+    empty: float = 0.0
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -512,6 +514,8 @@ class SequenceData:
             raise InputError(f"warmup_windows: expected 0..{self.length - 1}, got {self.warmup_windows}")
         if not (isinstance(self.history, (int, float)) and math.isfinite(self.history) and self.history >= 0):
             raise InputError(f"history: expected a weight >= 0, got {self.history!r}")
+        if not (isinstance(self.empty, (int, float)) and math.isfinite(self.empty) and self.empty >= 0):
+            raise InputError(f"empty: expected a weight >= 0, got {self.empty!r}")
         if self.history > 0 and self.length < 2:
             raise InputError("history: the second pass needs sequences of at least 2 windows (length >= 2)")
 
