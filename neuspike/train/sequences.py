@@ -41,6 +41,12 @@ zero padding leave. The term says nothing about the image's level. It costs one 
 (On ``e2vid`` it flattened that pattern to FireNet's in 20 steps without changing a score: the pattern was
 broader than SSIM's window, and the scores of such scenes follow the blank image's level;
 ``reports/e2vid/candidates/README.md``, stage 26.)
+
+Partial first windows (``partial_first`` > 0, default 0): every item's windows hold their full count,
+but a scene that gives few events, evaluated with the methods' bounded history, hands the network a
+single window cut short, from a zero state. That share of the training runs have their first window
+cut to the events of its last 1-4 of 5 bins, spread over the five (:func:`partial_window`); the target
+is unchanged (the scene at the window's end).
 """
 
 from __future__ import annotations
@@ -60,6 +66,7 @@ import torch.nn.functional as F
 from neuspike.utils import atomic
 from neuspike.conditions import Condition
 from neuspike.errors import InputError
+from neuspike.methods.representations import normalize_voxel_grid
 from neuspike.utils.rng import derive_rng
 from neuspike.scenes import SceneSpec, make_scene
 from neuspike.scenes.motion import backward_flow, image_speed_px_s, scene_time_s
@@ -68,7 +75,7 @@ from neuspike.simulation.recording import SensorConfig
 from neuspike.train.spec import LIGHTS, MOTIONS, SequenceData, TrainSpec
 
 __all__ = [
-    "Cell", "SequenceItem", "SequenceTask", "build_shard", "draw_cell", "load_shard", "make_batch",
+    "Cell", "SequenceItem", "SequenceTask", "build_shard", "draw_cell", "load_shard", "make_batch", "partial_window",
     "run_sequence", "sequence_loss", "simulate_item", "validate_sequences", "warp",
 ]
 
@@ -337,10 +344,31 @@ def load_shard(paths: Sequence[Path], *, stack_dir: Path | None = None) -> dict[
     return shard
 
 
+def partial_window(voxels: np.ndarray, kept: int) -> np.ndarray:
+    """A normalised voxel grid (B, H, W) as if its window had been cut short: the events of its last
+    ``kept`` of B bins, spread over all B bins (linear interpolation along time) and normalised again.
+
+    A window whose event history runs out before its count is reached (a scene that gives few events,
+    evaluated with the methods' bounded history) spans only the latest part of a full window's time, and
+    its B bins divide that shorter span. The stored grids are normalised already, so this is an
+    approximation of the grid the shorter window would give (exact for ``kept`` = B).
+    """
+    b = voxels.shape[0]
+    if not 1 <= kept <= b:
+        raise InputError(f"kept: expected 1..{b} bins, got {kept}")
+    pos = (b - kept) + np.arange(b) * (kept - 1) / max(b - 1, 1)
+    lo = np.floor(pos).astype(int)
+    hi = np.minimum(lo + 1, b - 1)
+    frac = (pos - lo)[:, None, None].astype(np.float32)
+    return normalize_voxel_grid(voxels[lo] * (1 - frac) + voxels[hi] * frac)
+
+
 def make_batch(shard: dict[str, np.ndarray], rng: np.random.Generator, *, batch: int,
-               crop: int, length: int | None = None) -> dict[str, torch.Tensor]:
+               crop: int, length: int | None = None, partial_first: float = 0.0) -> dict[str, torch.Tensor]:
     """Random items, a random run of ``length`` consecutive windows (default all), random crops of
-    ``crop`` pixels, random horizontal/vertical flips (flow signs follow).
+    ``crop`` pixels, random horizontal/vertical flips (flow signs follow); with ``partial_first`` > 0,
+    that share of the runs have their first window cut short (:func:`partial_window`, the last 1 to
+    B - 1 of its B bins, drawn uniformly), as a scene that gives few events hands a network its first window.
 
     Returns float32 CPU tensors ``voxels`` (K, B, 5, c, c), ``targets`` (K, B, 1, c, c), ``flow`` (K, B, 2, c, c).
     """
@@ -366,6 +394,10 @@ def make_batch(shard: dict[str, np.ndarray], rng: np.random.Generator, *, batch:
                 if flip_y:
                     a[:, 1] *= -1
             out[key].append(np.ascontiguousarray(a))
+    if partial_first > 0:  # drawn after the crops, so that the runs themselves are the ones drawn without it
+        for run in out["voxels"]:
+            if rng.random() < partial_first:
+                run[0] = partial_window(run[0], int(rng.integers(1, run.shape[1])))
     return {k: torch.from_numpy(np.stack(v, axis=1)) for k, v in out.items()}
 
 
@@ -509,7 +541,7 @@ class SequenceTask:
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
         spec = self.spec
         batch = make_batch(self.train_shard, derive_rng(spec.seed, "batch", step), batch=spec.batch, crop=spec.crop,
-                           length=self.data.length)
+                           length=self.data.length, partial_first=self.data.partial_first)
         batch = {k: v.to(self.device) for k, v in batch.items()}
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
         loss, parts = sequence_loss(outputs, batch, self.data)

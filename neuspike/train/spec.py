@@ -443,7 +443,8 @@ class SequenceData:
     ``history`` times the gap between the last image and the same image from a second pass over the
     last ``length - length // 2`` windows started from a zero state (0: off;
     :mod:`neuspike.train.sequences`), plus ``empty`` times the spatial spread of the image that one
-    window without events gives from a zero state (0: off).
+    window without events gives from a zero state (0: off). ``partial_first``: share of the training runs
+    whose first window is cut short (:func:`neuspike.train.sequences.partial_window`; 0: none).
     """
 
     kind: ClassVar[str] = "sequences"
@@ -475,6 +476,7 @@ class SequenceData:
     occlusion_alpha: float = 50.0
     history: float = 0.0
     empty: float = 0.0
+    partial_first: float = 0.0
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -516,6 +518,8 @@ class SequenceData:
             raise InputError(f"history: expected a weight >= 0, got {self.history!r}")
         if not (isinstance(self.empty, (int, float)) and math.isfinite(self.empty) and self.empty >= 0):
             raise InputError(f"empty: expected a weight >= 0, got {self.empty!r}")
+        if not (isinstance(self.partial_first, (int, float)) and 0.0 <= self.partial_first <= 1.0):
+            raise InputError(f"partial_first: expected a share in [0, 1], got {self.partial_first!r}")
         if self.history > 0 and self.length < 2:
             raise InputError("history: the second pass needs sequences of at least 2 windows (length >= 2)")
 

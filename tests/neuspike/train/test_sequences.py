@@ -509,6 +509,47 @@ def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
         DataSpec(empty=-1.0)
 
 
+def test_partial_window_spreads_its_last_bins_over_the_window():
+    """All bins kept: the grid itself; one bin kept: that bin's events in every bin; two of five kept:
+    the bins interpolate linearly from the fourth to the fifth; the result is normalised (mean 0, std 1
+    over its non-zero entries) and an impossible count is refused."""
+    from neuspike.methods.representations import normalize_voxel_grid
+    from neuspike.train.sequences import partial_window
+
+    rng = np.random.default_rng(3)
+    raw = rng.normal(size=(5, 6, 7)) * (rng.random((5, 6, 7)) < 0.4)
+    grid = normalize_voxel_grid(raw)
+    np.testing.assert_allclose(partial_window(grid, 5), grid, atol=1e-5)
+    one = partial_window(grid, 1)
+    for b in range(5):
+        np.testing.assert_allclose(one[b], normalize_voxel_grid(np.repeat(grid[4:], 5, axis=0))[b], atol=1e-5)
+    two = partial_window(grid, 2)
+    expected = normalize_voxel_grid(np.stack([grid[3] + (grid[4] - grid[3]) * t / 4 for t in range(5)]))
+    np.testing.assert_allclose(two, expected, atol=1e-5)
+    values = two[two != 0]
+    assert abs(values.mean()) < 1e-5 and abs(values.std() - 1) < 1e-4
+    with pytest.raises(InputError, match="kept"):
+        partial_window(grid, 0)
+
+
+def test_partial_first_cuts_the_first_window_of_that_share_of_runs_and_leaves_the_rest(tiny):
+    """At 0 the batches are exactly the ones drawn before the option existed; at 1 every run's first
+    window is a cut-short grid and every other window, target and flow is unchanged."""
+    _, _, _, item = tiny
+    shard = {"voxels": item.voxels[None].repeat(3, 0), "targets": item.targets[None, :, None].repeat(3, 0),
+             "flow": item.flow[None].repeat(3, 0)}
+    plain = make_batch(shard, np.random.default_rng(5), batch=3, crop=24, length=3)
+    same = make_batch(shard, np.random.default_rng(5), batch=3, crop=24, length=3, partial_first=0.0)
+    cut = make_batch(shard, np.random.default_rng(5), batch=3, crop=24, length=3, partial_first=1.0)
+    for key in plain:
+        assert torch.equal(plain[key], same[key])
+    assert torch.equal(cut["voxels"][1:], plain["voxels"][1:])
+    assert torch.equal(cut["targets"], plain["targets"]) and torch.equal(cut["flow"], plain["flow"])
+    assert not torch.equal(cut["voxels"][0], plain["voxels"][0])
+    with pytest.raises(InputError, match="partial_first"):
+        DataSpec(partial_first=1.5)
+
+
 def test_runs_with_different_seeds_never_share_a_shard():
     """Item i is drawn from ``derive_rng(seed, ...)``, so a run with another seed must not reuse (and
     silently train on) the items a seed-0 run left in the shard root; seed 0 keeps the old folder names."""
