@@ -38,7 +38,7 @@ mean is added. Without events an image has no structure to show, yet a network w
 hold events never learns that: its answer to a scene that gives almost none (a still scene, a wide
 uniform region far from any edge, a recording's first window) is whatever pattern its biases and
 zero padding leave. The term says nothing about the image's level. It costs one window more per step.
-(On ``e2vid`` it flattened that pattern to FireNet's in 20 steps without changing a score: the pattern was
+(On ``e2vid`` it flattened that pattern to FireNet's within 120 steps without changing a score: the pattern was
 broader than SSIM's window, and the scores of such scenes follow the blank image's level;
 ``reports/e2vid/candidates/README.md``, stage 26.)
 
