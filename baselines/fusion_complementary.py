@@ -42,7 +42,9 @@ infinite crossover).
 
 Dark floor: a pixel without a spike in the ``n`` averaged planes has ``r = 0``, whose log does not
 exist; its rate is taken as ``r_min = 0.5 / n`` (half a spike in the averaged planes), the
-estimate's own resolution. The choice is deterministic and recorded (``last_planes``).
+estimate's own resolution. The choice is deterministic and recorded (``last_planes``). The sensor's
+dark rate (:func:`neuspike.methods.normalisation.dark_level`) is subtracted from ``r`` first, so the
+dark current's spikes are not taken for light.
 
 Events: every event the sample carries up to the key instant (``t_i < t``), its history included;
 the filter runs from the first of them (``t_0``). Events after the key instant show a later scene
@@ -64,7 +66,7 @@ import math
 import numpy as np
 
 from baselines.event_integration import RunningEventSum, StreamsEventSum, highpass_events, log_to_image, resolve_threshold
-from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.normalisation import dark_level, dark_note, rate_to_image
 from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import InputError
 from neuspike.methods import Method
@@ -214,7 +216,7 @@ def _rate_image(frame_rate: np.ndarray, event_log: np.ndarray, gain: float | Non
     if gain is None:
         return log_to_image(np.log(frame_rate) + event_log)
     cap = np.maximum(np.log(gain) - np.log(frame_rate), 0.0)  # beyond it the pixel saturates at 1
-    return rate_to_image(frame_rate * np.exp(np.minimum(event_log, cap)), gain)
+    return rate_to_image(frame_rate * np.exp(np.minimum(event_log, cap)), gain, dark_rate=0.0)
 
 
 class ComplementaryFusion(StreamsEventSum, Method):
@@ -264,7 +266,8 @@ class ComplementaryFusion(StreamsEventSum, Method):
         start, stop = causal_planes(stream.num_planes, stream.plane_rate_hz, stream.start_s, time_s,
                                     self.params["spike_planes"])
         rate = causal_spike_rate(stream.planes, start, stop)
-        frame_rate = np.maximum(rate, DARK_FLOOR_SPIKES / (stop - start))
+        dark_rate, dark_how = dark_level(stream)  # the sensor's floor comes off before the floor of no spikes
+        frame_rate = np.maximum(rate - dark_rate if dark_rate > 0 else rate, DARK_FLOOR_SPIKES / (stop - start))
         cutoff_hz = self.params["cutoff_hz"]
         if cutoff_hz is None:
             cutoff_hz = matched_cutoff_hz(stream.plane_rate_hz, stream.start_s, time_s, start, stop)
@@ -276,7 +279,8 @@ class ComplementaryFusion(StreamsEventSum, Method):
                                                  height=sample.height, width=sample.width, previous_s=self._next_from)
         self.last_planes, self.last_cutoff_hz = (start, stop), cutoff_hz
         self.last_threshold, self.last_threshold_source = threshold, source
-        return _rate_image(frame_rate, event_log, stream.gain)
+        image, label = _rate_image(frame_rate, event_log, stream.gain)
+        return image, label + dark_note(dark_rate, dark_how)
 
 
 def register_methods(register) -> None:

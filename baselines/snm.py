@@ -43,8 +43,9 @@ the steady state exactly once converged and is unbiased from a cold start, for a
 ``q``: it is a normalised weighted mean of the refined current. Because the refined current
 conserves charge, a perfectly periodic spike train of period ``P`` gives ``x = 1 / P`` on every
 plane and the read-out ``1 / P`` exactly. The rate becomes an image through
-:func:`neuspike.methods.normalisation.rate_to_image`: divided by the stream's gain when known (radiance),
-the robust 99th-percentile scale when not (real recordings).
+:func:`neuspike.methods.normalisation.stream_rate_to_image`: the stream's dark rate subtracted (known, or
+estimated from the window), then divided by the stream's gain when known (radiance), the robust
+99th-percentile scale when not (real recordings).
 
 Speed
 -----
@@ -120,7 +121,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.normalisation import stream_rate_to_image
 from neuspike.utils.checks import check_nonnegative, check_positive, check_spike_window
 from neuspike.errors import InputError
 from neuspike.methods import Method
@@ -803,7 +804,7 @@ class SNM(Method):
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
         rate = snm_rate(stream.planes, sample.key_plane, self.snm, plane_rate_hz=stream.plane_rate_hz)
-        return rate_to_image(rate, stream.gain)
+        return stream_rate_to_image(rate, stream)
 
 
 def register_methods(register) -> None:

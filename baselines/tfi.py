@@ -3,7 +3,8 @@
 For the key plane ``k`` of a window of ``T`` planes, ``t_prev`` is the last plane at or before ``k``
 in which the pixel fired and ``t_next`` the first plane after ``k``; the interval is
 ``ISI = t_next - t_prev`` planes (>= 1), the rate ``1 / ISI`` spikes per plane and the radiance
-``1 / (ISI * gain)``. An ideal integrate-and-fire pixel with constant rate ``a`` has intervals of
+``(1 / ISI - d) / gain`` with ``d`` the sensor's dark rate (known, or estimated from the window:
+:func:`neuspike.methods.normalisation.dark_level`). An ideal integrate-and-fire pixel with constant rate ``a`` has intervals of
 ``floor(1 / a)`` or ``ceil(1 / a)`` planes, so the estimate lies in ``[1 / ceil(1/a), 1 / floor(1/a)]``.
 
 Pixels without a spike on one side
@@ -32,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from neuspike.utils.checks import check_spike_window
-from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.normalisation import stream_rate_to_image
 from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample
@@ -141,7 +142,7 @@ class TFI(Method):
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
-        return rate_to_image(tfi_rate(stream.planes, sample.key_plane), stream.gain)
+        return stream_rate_to_image(tfi_rate(stream.planes, sample.key_plane), stream)
 
 
 def register_methods(register) -> None:

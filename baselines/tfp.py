@@ -1,8 +1,10 @@
 """TFP, texture from playback: the spike rate in a window of planes around the key plane.
 
 The estimate of a pixel's rate (spikes per plane) is its spike count in a window of planes divided by
-the number of planes in that window; the radiance is rate / gain, where the gain is the expected
-number of spikes per plane per unit radiance (``L / threshold`` for simulated data). When the gain is
+the number of planes in that window; the radiance is (rate - dark rate) / gain, where the gain is the
+expected number of spikes per plane per unit radiance (``L / threshold`` for simulated data) and the
+dark rate the sensor's spikes per plane in darkness (known, or estimated from the window:
+:func:`neuspike.methods.normalisation.dark_level`). When the gain is
 unknown (real recordings) the rate goes through the robust normalisation of
 :mod:`neuspike.methods.normalisation` instead, and the method says so in its normalisation label.
 
@@ -34,7 +36,7 @@ import numpy as np
 
 from neuspike.utils.checks import check_int, check_positive_int, check_spike_window
 from neuspike.errors import InputError
-from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.normalisation import stream_rate_to_image
 from neuspike.methods.representations import spike_count
 from neuspike.methods import Method
 from neuspike.sample import Sample
@@ -164,7 +166,7 @@ class TFP(Method):
         self._previous = (stream.planes, base, a0, a1, stream.plane_rate_hz, count)
         rate = count * (1.0 / (stop - start))  # as _window_rate computes it
         self.last_window = (start, stop)
-        return rate_to_image(rate, stream.gain)
+        return stream_rate_to_image(rate, stream)
 
 
 def register_methods(register) -> None:

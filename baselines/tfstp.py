@@ -66,7 +66,7 @@ from typing import Any
 
 import numpy as np
 
-from neuspike.methods.normalisation import rate_to_image
+from neuspike.methods.normalisation import stream_rate_to_image
 from neuspike.utils.checks import check_positive, check_spike_window
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.methods import Method
@@ -450,7 +450,7 @@ class TFSTP(Method):
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
-        return rate_to_image(tfstp_rate(stream.planes, sample.key_plane, self.stp), stream.gain)
+        return stream_rate_to_image(tfstp_rate(stream.planes, sample.key_plane, self.stp), stream)
 
 
 def register_methods(register) -> None:

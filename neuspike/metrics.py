@@ -24,6 +24,13 @@ Affine alignment
     metrics are defined on that range and the ground truth lies in it, so clipping can only move the
     aligned image closer to it); ``psnr_affine`` and ``ssim_affine`` are reported as separate metrics.
 
+Isolated outliers (:func:`isolated_outliers`)
+    Specks: pixels that lie beyond the range of all eight of their neighbours by more than
+    :data:`SPECK_THRESHOLD` (a bright pixel above the brightest neighbour, or a dark one below the
+    darkest), counted only where the ground truth has no such pixel, as a fraction of the interior
+    pixels. Noise that spreads over neighbourhoods rarely does this; a network's isolated bright and
+    dark pixels under sensor noise do, and PSNR hides them (one pixel in a thousand costs little).
+
 No-reference measures (:func:`no_reference`), in the image's own units
     ``noise_sigma``
         Standard deviation of additive white Gaussian noise, estimated from the finest diagonal
@@ -281,6 +288,44 @@ def evaluate(image: Any, reference: Any, *, data_range: float) -> dict[str, floa
         "psnr_affine": _psnr(aligned, b, dr),
         "ssim_affine": _ssim(aligned, b, dr),
     }
+
+
+#: How far, in units of the data range, a pixel must lie beyond all eight neighbours to count as a speck.
+SPECK_THRESHOLD = 0.1
+_RING = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.uint8)
+
+
+def _specks(a: np.ndarray, margin: float) -> np.ndarray:
+    """Bool (H - 2, W - 2): interior pixels beyond all eight neighbours' range by more than ``margin``."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    high = cv2.dilate(a, _RING, borderType=cv2.BORDER_REPLICATE)
+    low = cv2.erode(a, _RING, borderType=cv2.BORDER_REPLICATE)
+    out = (a - high > margin) | (low - a > margin)
+    return out[1:-1, 1:-1]
+
+
+def isolated_outliers(image: Any, reference: Any, *, data_range: float,
+                      threshold: float = SPECK_THRESHOLD) -> float:
+    """The fraction of pixels that are specks in ``image`` but not in ``reference`` (module docstring).
+
+    Parameters
+    ----------
+    image, reference : array (H, W), real, values in [0, data_range]; H, W >= 3
+    data_range : float, keyword-only, required
+    threshold : float
+        The margin beyond the neighbours' range, as a fraction of ``data_range``.
+
+    Returns
+    -------
+    float
+        In [0, 1], over the ``(H - 2) (W - 2)`` interior pixels (the border has no full neighbourhood).
+    """
+    a, b, dr = _check_pair(image, reference, data_range)
+    if min(a.shape) < 3:
+        raise InputError(f"image: expected at least 3x3 pixels, got {a.shape}")
+    margin = float(threshold) * dr
+    extra = _specks(a, margin) & ~_specks(b, margin)
+    return float(np.count_nonzero(extra)) / extra.size
 
 
 #: Pixels trimmed from the edge of a static region before :func:`static_texture` measures it (the

@@ -28,6 +28,7 @@ from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESEN
                                            key_representation, spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
+from neuspike.methods.normalisation import dark_level
 from neuspike.nets.sliding import SlidingRepresentation
 
 __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod", "count_level"]
@@ -39,7 +40,7 @@ ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion",
 CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none",
                  "key_estimates": "none"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
-#: sensor's gain and dark rate are known (:func:`count_level`), ``"network"`` as the network outputs it.
+#: sensor's gain is known (:func:`count_level`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
 #: The read-out label of an image whose mean level was counted from the spikes.
 COUNTED = "mean level counted from the spikes"
@@ -52,18 +53,21 @@ def count_level(sample: Sample) -> float | None:
     is the dark rate, and the charge left in the integrator at the window's end loses half a spike
     on average, whether the pixel starts at rest or with a random charge. So
     ``(mean rate + 1 / (2 T) - d) / gain``, over all the frame's pixels, estimates the frame's mean
-    radiance without bias, and with almost no variance at this many pixels. It needs the gain and
-    the dark rate (a simulation knows both; a real recording rarely does): None otherwise.
+    radiance without bias, and with almost no variance at this many pixels. It needs the gain (a
+    simulation knows it; a real recording rarely does): None otherwise. The dark rate is the stream's,
+    or, where the stream does not know it, estimated from the window
+    (:func:`neuspike.methods.normalisation.dark_level`).
     """
     spikes = sample.spikes
-    if spikes is None or spikes.dark_rate is None:
+    if spikes is None:
         return None
     gain, how = spike_gain(sample)
     if how != "known":
         return None
+    dark_rate, _ = dark_level(spikes)
     planes = spikes.planes
     rate = np.count_nonzero(planes) / planes.size
-    return float((rate + 0.5 / planes.shape[0] - spikes.dark_rate) / gain)
+    return float((rate + 0.5 / planes.shape[0] - dark_rate) / gain)
 
 
 def _check_params(params: Mapping[str, Any]) -> dict[str, Any]:
@@ -257,7 +261,7 @@ class NeuSpikeNetMethod(LearnedMethod):
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)
         if getattr(self, "_level", None) is not None:
-            label = f"{label}; {COUNTED}"
+            label = f"{label}; {COUNTED}" + (", dark rate estimated" if sample.spikes.dark_rate is None else "")
         if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label

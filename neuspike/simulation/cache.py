@@ -55,7 +55,7 @@ from neuspike.streams import EventStream, SpikeStream
 
 CACHE_FORMAT = "neuspike-recording-cache/2"  # 2: the spike stream's dark rate is stored; files of 1 are simulated again
 #: Metadata of one modality only: kept from that modality's part when parts are joined.
-_MODALITY_META = {SPIKES: ("spike_count",), EVENTS: ("event_count", "event_count_window", "history_s")}
+_MODALITY_META = {SPIKES: ("spike_count", "dark_rate"), EVENTS: ("event_count", "event_count_window", "history_s")}
 
 
 # ----------------------------------------------------------------------------------------------

@@ -161,6 +161,7 @@ def simulate_window(
         spikes = spike_cam.capture(np.ascontiguousarray(frames[n_hist:]), hold_planes=hold, start_s=0.0)
         stages += tag_stages(spikes.meta.get("stages", []), SPIKES)
         meta["spike_count"] = int(spikes.meta.get("spike_count", np.count_nonzero(spikes.planes)))
+        meta["dark_rate"] = spike_cam.dark_rate  # 0.0 without a dark-current stage: known, not missing
     if event_cam is not None:
         events = event_cam.capture(frames, sensor_times)
         stages += tag_stages(events.meta.get("stages", []), EVENTS)

@@ -32,7 +32,7 @@ RATE_HZ = 20_000.0
 
 
 def spikes(planes: np.ndarray, gain: float | None = 0.25) -> SpikeStream:
-    return SpikeStream(planes, plane_rate_hz=RATE_HZ, gain=gain)
+    return SpikeStream(planes, plane_rate_hz=RATE_HZ, gain=gain, dark_rate=0.0)
 
 
 def random_events(rng: np.random.Generator, n: int, height: int, width: int, t0: float, t1: float) -> EventStream:
@@ -82,7 +82,7 @@ def test_no_events_gives_the_spike_estimate_exactly():
     for events in (EventStream.empty(7, 6), random_events(rng, 50, 6, 7, 17 / RATE_HZ, 32 / RATE_HZ)):
         method = ComplementaryFusion()
         image = method.reconstruct(sample_of(spikes(planes), events))
-        np.testing.assert_array_equal(image, rate_to_image(expected_rate, 0.25)[0])
+        np.testing.assert_array_equal(image, rate_to_image(expected_rate, 0.25, dark_rate=0.0)[0])
         assert image[0, 0] == np.float32(0.5 / 16 / 0.25)
         assert method.last_planes == (0, 16) and method.last_normalisation == "gain"
         robust = ComplementaryFusion().reconstruct(sample_of(spikes(planes, gain=None), events))

@@ -59,7 +59,7 @@ def make_sample(planes: np.ndarray, gain: float | None, key_plane: int | None = 
         key_time_s=(key + 0.5) / RATE_HZ,
         window_start_s=0.0,
         window_end_s=num_planes / RATE_HZ,
-        spikes=SpikeStream(planes, plane_rate_hz=RATE_HZ, gain=gain),
+        spikes=SpikeStream(planes, plane_rate_hz=RATE_HZ, gain=gain, dark_rate=0.0),
         **extra,
     )
 

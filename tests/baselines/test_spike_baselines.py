@@ -52,7 +52,7 @@ def make_sample(planes: np.ndarray, gain: float | None, ground_truth: np.ndarray
         key_time_s=0.5 * t / PLANE_RATE_HZ,
         window_start_s=0.0,
         window_end_s=t / PLANE_RATE_HZ,
-        spikes=SpikeStream(planes, plane_rate_hz=PLANE_RATE_HZ, gain=gain),
+        spikes=SpikeStream(planes, plane_rate_hz=PLANE_RATE_HZ, gain=gain, dark_rate=0.0),
         ground_truth=ground_truth,
     )
 
@@ -215,7 +215,7 @@ def test_tfi_known_trains_and_the_edge_rule():
             key_time_s=(key + 0.5) / PLANE_RATE_HZ,
             window_start_s=0.0,
             window_end_s=t / PLANE_RATE_HZ,
-            spikes=SpikeStream(planes, gain=gain),
+            spikes=SpikeStream(planes, gain=gain, dark_rate=0.0),
         )
     )
     np.testing.assert_allclose(image[0], np.minimum(1.0 / (expected * gain), 1.0), rtol=1e-6)
