@@ -52,7 +52,7 @@ from neuspike import methods as registry
 from neuspike.errors import InputError, one_line
 from neuspike.utils.jsonio import canonical_json
 from neuspike.utils.parallel import set_threads
-from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, static_texture
+from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, isolated_outliers, static_texture
 from neuspike.simulation.cache import RecordingCache
 from neuspike.simulation.cell import simulate_recording
 from neuspike.simulation.recording import Recording, SensorConfig
@@ -61,7 +61,7 @@ from neuspike.simulation.window import sample_rng, static_region
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
 #: The metrics of every row, in the order rows are produced.
-METRICS: tuple[str, ...] = (*FULL_REFERENCE_METRICS, "static_texture")
+METRICS: tuple[str, ...] = (*FULL_REFERENCE_METRICS, "static_texture", "specks")
 DATA_RANGE = 1.0
 
 
@@ -428,6 +428,7 @@ def run_cell(task: CellTask) -> CellResult:
             row["effects"] = ";".join(f"{m}:{n}" for m, n in stage_names if m in used)
         def score(image: np.ndarray) -> dict[str, float]:
             values = evaluate(image, truth, data_range=DATA_RANGE)
+            values["specks"] = isolated_outliers(image, truth, data_range=DATA_RANGE)
             if static is not None:
                 values["static_texture"] = static_texture(image, truth, static, data_range=DATA_RANGE)
             return values

@@ -12,6 +12,8 @@ Presets (the paper's figures and tables)
 ``noise``  (Table 3)   L = 1/4, S = 128, noise in {small, medium, high} (the paper's levels:
                        spike fixed-pattern sigma 10 / 50 / 90 planes with a random initial charge,
                        event shot noise 0.001 / 10 / 100 Hz; see :mod:`neuspike.conditions`).
+``light-noise``        S = 128, Figure 3's five light scales at each noise level (none, small,
+                       medium, high): light and noise together, a grid of two swept axes.
 
 Every condition of a preset also declares :data:`DEFAULT_EFFECTS`: the random initial charge of
 Algorithm 1 (the paper's simulator always draws it) and the event camera's ``clean`` preset from
@@ -55,8 +57,15 @@ PAPER_MOTIONS = (16, 32, 64, 128, 256)
 PAPER_FIXED_MOTION = 128
 #: The noise levels of Table 3.
 PAPER_NOISE_LEVELS = ("small", "medium", "high")
-#: The axes a preset sweeps, in the order they are reported.
+#: The condition axes a grid spans, in the order they are reported.
 AXES = ("light", "motion", "noise")
+#: The presets (:func:`preset`): one per swept axis, and light and noise swept together.
+PRESETS = ("light", "motion", "noise", "light-noise")
+#: The axis along which a preset's reconstructions are kept for the figure grid (its swept axis; the
+#: light x noise grid keeps them across the noise levels at its first, darkest, light scale).
+IMAGE_AXIS = {"light": "light", "motion": "motion", "noise": "noise", "light-noise": "noise"}
+#: The noise levels of the light x noise grid.
+LIGHT_NOISE_LEVELS = ("none",) + PAPER_NOISE_LEVELS
 
 #: Extra stages declared in every preset condition (see the module docstring).
 DEFAULT_EFFECTS: tuple[Effect, ...] = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
@@ -278,12 +287,12 @@ def preset(
     noises: Sequence[str] | None = None,
     effects: Iterable[Effect] | None = None,
 ) -> Grid:
-    """The paper's grid for ``axis`` (``"light"``, ``"motion"`` or ``"noise"``), with overrides.
+    """The paper's grid for ``axis`` (one of :data:`PRESETS`), with overrides.
 
     Parameters
     ----------
     axis : str
-        Which preset (module docstring).
+        Which preset (module docstring): ``"light"``, ``"motion"``, ``"noise"`` or ``"light-noise"``.
     full : bool
         The paper-size run (400x250, every scene kind over :data:`FULL_PHOTOS`, :data:`FULL_SEEDS`)
         instead of the quick default.
@@ -297,16 +306,16 @@ def preset(
     InputError
         Unknown axis, or an invalid axis value.
     """
-    if axis not in AXES:
-        raise InputError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+    if axis not in PRESETS:
+        raise InputError(f"axis must be one of {', '.join(PRESETS)}, got {axis!r}")
     size = _check_size(size if size is not None else (FULL_SIZE if full else QUICK_SIZE))
     if scenes is None:
         scenes = full_scene_names() if full else QUICK_SCENES
     if seeds is None:
         seeds = FULL_SEEDS if full else QUICK_SEEDS
-    default_lights = PAPER_LIGHTS if axis == "light" else (PAPER_FIXED_LIGHT,)
+    default_lights = PAPER_LIGHTS if axis in ("light", "light-noise") else (PAPER_FIXED_LIGHT,)
     default_motions = PAPER_MOTIONS if axis == "motion" else (PAPER_FIXED_MOTION,)
-    default_noises = PAPER_NOISE_LEVELS if axis == "noise" else ("none",)
+    default_noises = {"noise": PAPER_NOISE_LEVELS, "light-noise": LIGHT_NOISE_LEVELS}.get(axis, ("none",))
     return Grid(
         scenes=tuple(scene_entry(name, size) for name in scenes),
         lights=tuple(float(v) for v in (lights if lights is not None else default_lights)),

@@ -66,7 +66,7 @@ from neuspike.utils.jsonio import canonical_json, portable_path, stable_hash
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 #: Bump when a change of the harness changes the rows a cell produces (part of every cell id).
-HARNESS_VERSION = "2"  # 2: the static_texture metric
+HARNESS_VERSION = "3"  # 2: the static_texture metric; 3: the specks metric, the dark rate subtracted
 #: Default event history for recurrent methods, in windows of the spike window's duration.
 
 

@@ -19,7 +19,8 @@ Outputs (into ``RESULTS_DIR``, or ``--out``; every file written atomically)
     ``figures/grid_<scene>_<axis>.png``  reconstruction grid of every scene with images (the PDF
                                          shows the first scene of each scene kind)
     ``figures/accuracy_vs_time.png``     PSNR and SSIM against ms per frame, Pareto front marked
-    ``tables/summary``, ``tables/<axis>``, ``tables/noise_table3`` (with a noise axis),
+    ``tables/summary``, ``tables/<axis>``, ``tables/noise_table3`` (with a noise axis), ``tables/light_by_noise``
+    and ``figures/light_psnr_ssim_noise=<level>.png`` (light and noise both swept),
     ``tables/failures``, ``tables/accuracy_vs_time``, ``tables/claims``, ``tables/timing``
     (with ``timing.csv``): each as ``.md`` and ``.csv``
     ``report.pdf``  title page with provenance, the claims page, the figures, the tables
@@ -442,6 +443,28 @@ def _report_results(inputs: ReportInputs, f: pd.DataFrame, fig_dir: Path, tab_di
                     figure_pages.append(fig)
                 else:
                     figs.close_all([fig])
+
+    crossed = tb.crossed_axes(f)
+    if crossed is not None:  # the light x noise grid: the light axis at each noise level
+        axis, by = crossed
+        _write_table(tab_dir, f"{axis}_by_{by}", tb.crossed_markdown(f, axis, by), tb.crossed_csv(f, axis, by), written)
+        values = tb.axis_values(f, axis)
+        for level in tb.axis_values(f, by):
+            part = f[f[by] == level]
+            fig = figs.axis_figure(part, axis, ("psnr", "ssim"), spread=spread)
+            written.append(figs.save_png(fig, fig_dir / f"{axis}_psnr_ssim_{safe_name(f'{by}={level}')}.png"))
+            figure_pages.append(fig)
+            for metric in ("psnr", "ssim", "specks"):
+                wide = tb.axis_means(part, axis, metric)
+                if wide.empty:
+                    continue
+                table_pages += figs.table_figures(
+                    [f"method \\ {axis}", *[tb.axis_label(axis, v) for v in values]],
+                    [[m, *[tb.fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric) for v in values]]
+                     for m in wide.index],
+                    f"{tb.METRIC_LABELS[metric]} against the {tb.AXIS_TITLES[axis]}, "
+                    f"{tb.AXIS_TITLES[by]} {tb.axis_label(by, level)}",
+                    note=f"Mean over scenes and seeds of the ok cells, {tb.held_conditions(part, axis) or 'one condition'}.")
 
     if "noise" in f and any(lv in set(f["noise"].astype(str)) for lv in tb.PAPER_TABLE3):
         ours = tb.noise_table(f)

@@ -16,7 +16,9 @@ Columns (:data:`COLUMNS`)
                     (``Method.describe()``); reports read a method's parameters here, never from its name
 ``metric``          one of ``psnr``, ``ssim``, ``psnr_affine``, ``ssim_affine``, ``static_texture`` (the
                     gradient correlation over the pixels that never change, NaN where a cell has no
-                    static region: :func:`neuspike.metrics.static_texture`); ``value`` its value
+                    static region: :func:`neuspike.metrics.static_texture`), ``specks`` (the fraction
+                    of pixels that are isolated outliers where the truth has none:
+                    :func:`neuspike.metrics.isolated_outliers`); ``value`` its value
 ``status``          ``ok``; ``error`` (the method or the simulation raised: ``value`` is NaN and
                     ``error`` holds the exception's type and message); ``skipped`` (the method
                     cannot run here, e.g. learned weights not given: ``error`` holds the reason;

@@ -1,4 +1,4 @@
-"""Sweeps over light and motion (the paper's Figures 3 and 4): ``python -m bench.sweep``.
+"""Sweeps over light, motion, noise, and light and noise together: ``python -m bench.sweep``.
 
 The command: it parses its options into a :class:`bench.harness.SweepSpec` and an
 :class:`bench.harness.Execution` and runs :func:`bench.harness.run_sweep` (outputs, resuming and exit
@@ -151,7 +151,8 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
     )
     return SweepSpec(
         name=name, grid=grid, methods=methods_from(args), sensor=SensorConfig(planes=args.planes),
-        history_windows=args.history_windows, weights=str(weights) if weights is not None else None, axis=axis,
+        history_windows=args.history_windows, weights=str(weights) if weights is not None else None,
+        axis=grids.IMAGE_AXIS[axis],
     )
 
 
@@ -202,22 +203,26 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m bench.sweep",
-        description="Sweep light or motion over every registered method (the paper's Figures 3 and 4): "
+        description="Sweep light, motion or noise, or light and noise together, over every registered method "
+        "(the paper's Figures 3 and 4 and Table 3): "
         "simulate each cell once, reconstruct with every method, score PSNR and SSIM (and their "
         "affine-aligned variants), time each method, and write tidy results.",
         epilog="examples:\n"
         "  python -m bench.sweep --axis light                 # quick: 2 scenes at 160x100, L = 1/32 ... 1/2\n"
         "  python -m bench.sweep --axis motion --methods tfp-w32,tfi,events-integrate\n"
+        "  python -m bench.sweep --axis light-noise --full --workers 2   # five light scales x four noise levels\n"
         "  python -m bench.sweep --axis light --full --workers 2 --weights ../shared/weights/firenet\n"
         "  python -m bench.sweep --axis light --executor dask --scheduler tcp://10.0.0.5:8786\n"
         "  python -m bench.sweep --axis motion --plugin my_methods --methods mine,tfi\n\n"
         "presets: light = S 128, L in {1/32, 1/16, 1/8, 1/4, 1/2}; motion = L 1/4, S in\n"
-        "{16, 32, 64, 128, 256}; noise level none (python -m bench.noise sweeps the noise levels).\n\n"
+        "{16, 32, 64, 128, 256}; noise level none; noise = L 1/4, S 128, noise small, medium, high\n"
+        "(python -m bench.noise is the same with a --level choice); light-noise = S 128, the light\n"
+        "preset's five L at each noise level none, small, medium, high (--lights narrows it).\n\n"
         + COMMON_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--axis", choices=("light", "motion"), default="light",
-                        help="the swept axis (default: light)")
+    parser.add_argument("--axis", choices=grids.PRESETS, default="light",
+                        help="the swept axis, or light-noise for light and noise together (default: light)")
     add_common_arguments(parser)
     return parser
 

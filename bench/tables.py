@@ -37,6 +37,7 @@ METRIC_LABELS: Mapping[str, str] = {
     "psnr": "PSNR (dB)", "ssim": "SSIM", "psnr_affine": "PSNR, affine-aligned (dB)",
     "ssim_affine": "SSIM, affine-aligned",
     "static_texture": "static texture (gradient correlation over the static regions)",
+    "specks": "isolated outliers (per mille of pixels; lower is better)",
 }
 #: Method families, in the order they are listed.
 FAMILIES: tuple[str, ...] = ("spike", "event", "fusion", "unknown")
@@ -380,6 +381,8 @@ def fmt(value: Any, kind: str = "g") -> str:
         return f"{float(value):.2f}"
     if kind in ("ssim", "ssim_affine", "static_texture"):
         return f"{float(value):.4f}"
+    if kind == "specks":  # a fraction of the pixels, written per mille
+        return f"{1000 * float(value):.2f}"
     if kind == "ms":
         v = float(value)
         if math.isinf(v):
@@ -445,6 +448,38 @@ def axis_markdown(frame: pd.DataFrame, axis: str) -> str:
                 for m in wide.index]
         parts.append(markdown_table([f"method \\ {axis}", *labels], rows, ["l"] + ["r"] * len(values)))
     return "".join(parts)
+
+
+def crossed_axes(frame: pd.DataFrame) -> tuple[str, str] | None:
+    """``("light", "noise")`` when both are swept (the light x noise grid), else None."""
+    axes = swept_axes(frame)
+    return ("light", "noise") if "light" in axes and "noise" in axes else None
+
+
+def crossed_markdown(frame: pd.DataFrame, axis: str, by: str) -> str:
+    """Per-method means against ``axis`` at each value of ``by``: one table per metric and ``by`` value."""
+    parts = [f"# Against the {AXIS_TITLES.get(axis, axis)} at each {AXIS_TITLES.get(by, by)}\n\n",
+             "Mean over scenes and seeds of the ok cells; `-`: no ok cell.\n"]
+    labels = [axis_label(axis, v) for v in axis_values(frame, axis)]
+    for metric in METRICS:
+        parts.append(f"\n## {METRIC_LABELS[metric]}\n")
+        for value in axis_values(frame, by):
+            wide = axis_means(frame[frame[by] == value], axis, metric)
+            parts.append(f"\n### {AXIS_TITLES.get(by, by)} {axis_label(by, value)}\n\n")
+            if wide.empty:
+                parts.append("No ok rows.\n")
+                continue
+            rows = [[m, *[fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric)
+                          for v in axis_values(frame, axis)]] for m in wide.index]
+            parts.append(markdown_table([f"method \\ {axis}", *labels], rows, ["l"] + ["r"] * len(labels)))
+    return "".join(parts)
+
+
+def crossed_csv(frame: pd.DataFrame, axis: str, by: str) -> pd.DataFrame:
+    """Tidy form of :func:`crossed_markdown`: ``metric, method, <by>, <axis>, mean, std, min, max, n``."""
+    parts = [axis_csv(frame[frame[by] == value], axis).assign(**{by: value}) for value in axis_values(frame, by)]
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=[by])
+    return out[["metric", "method", by, axis, "mean", "std", "min", "max", "n"]]
 
 
 def axis_csv(frame: pd.DataFrame, axis: str) -> pd.DataFrame:

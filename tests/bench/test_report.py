@@ -415,3 +415,38 @@ def test_fusion_claims_are_checked_against_the_fusion_network_not_the_classical_
     network_best = curves({"neuspike-net": {L: 31 + k for L, k in L5.items()},
                            "fusion-complementary": {L: 30 + k for L, k in L5.items()}}, "light", inputs=inputs)
     assert cl.fusion_best_everywhere(network_best)[0] == cl.HOLDS
+
+
+def test_a_light_noise_grid_gets_the_light_axis_at_each_noise_level(tmp_path):
+    """Two swept axes: a table and a figure of the light axis per noise level, each level's means its own."""
+    rows = []
+    for noise, drop in (("none", 0.0), ("high", 6.0)):
+        for light in LIGHTS:
+            for seed in SEEDS:
+                for method in ("tfp-w8", "tfi"):
+                    p = expected_psnr(method, light, "pan:camera", seed) - drop
+                    for metric, value in (("psnr", p), ("ssim", p / 40), ("specks", 0.001 * (drop > 0))):
+                        rows.append(row(method, metric=metric, value=value, light=light, noise=noise, seed=seed))
+    d = write_results(tmp_path / "ln", rows_frame(rows))
+    reporting.build_report(d)
+    tidy = pd.read_csv(d / "tables" / "light_by_noise.csv")
+    got = tidy[(tidy.metric == "psnr") & (tidy.method == "tfi") & (tidy.light == 1 / 8)].set_index("noise")["mean"]
+    want = np.mean([expected_psnr("tfi", 1 / 8, "pan:camera", s) for s in SEEDS])
+    assert got["none"] == pytest.approx(want) and got["high"] == pytest.approx(want - 6.0)
+    text = (d / "tables" / "light_by_noise.md").read_text()
+    assert "### noise level high" in text and "isolated outliers" in text
+    assert "| tfi | 1.00 |" in text  # specks written per mille
+    for level in ("none", "high"):
+        assert (d / "figures" / f"light_psnr_ssim_noise={level}.png").stat().st_size > 0
+
+
+def test_the_light_noise_preset_spans_five_lights_at_four_noise_levels():
+    from bench import grid as grids
+
+    g = grids.preset("light-noise", full=True)
+    assert g.lights == grids.PAPER_LIGHTS and g.motions == (128,)
+    assert g.noises == ("none", "small", "medium", "high")
+    assert len(g.cells()) == 5 * 4 * len(grids.full_scene_names()) * len(grids.FULL_SEEDS)
+    # its noisy cells at L = 1/4 are the noise preset's cells, so one cache serves both
+    noise_ids = {repr(c.identity()) for c in grids.preset("noise", full=True).cells()}
+    assert noise_ids <= {repr(c.identity()) for c in g.cells()}

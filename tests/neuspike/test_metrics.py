@@ -231,3 +231,47 @@ def test_static_texture_needs_a_large_enough_region(photo):
     assert math.isnan(metrics.static_texture(photo, photo, tiny, data_range=1.0))
     with pytest.raises(InputError, match="static"):
         metrics.static_texture(photo, photo, tiny.astype(np.uint8), data_range=1.0)
+
+
+# --- isolated outliers (specks) ---------------------------------------------------------------
+
+def test_isolated_outliers_count_single_pixels_beyond_all_their_neighbours(photo):
+    """A bright and a dark speck on a smooth ramp are two of the interior pixels; the same pixels
+    pushed by less than the margin, or by the margin on a textured photograph's edges, are not."""
+    ramp = np.tile(np.linspace(0.2, 0.8, 64), (48, 1))
+    specked = ramp.copy()
+    specked[10, 10] += 0.15
+    specked[30, 40] -= 0.15
+    interior = 46 * 62
+    assert metrics.isolated_outliers(specked, ramp, data_range=1.0) == pytest.approx(2 / interior)
+    faint = ramp.copy()
+    faint[10, 10] += 0.05
+    assert metrics.isolated_outliers(faint, ramp, data_range=1.0) == 0.0
+    assert metrics.isolated_outliers(photo, photo, data_range=1.0) == 0.0  # the truth's own are not counted
+    # a speck the truth has is not the image's fault
+    assert metrics.isolated_outliers(specked, specked, data_range=1.0) == 0.0
+    # data_range scales the margin
+    assert metrics.isolated_outliers(255 * specked, 255 * ramp, data_range=255.0) == pytest.approx(2 / interior)
+
+
+def test_isolated_outliers_tell_specks_from_noise_that_spreads(rng):
+    """Noise of the same strength, once spread over 3x3 neighbourhoods (as SNM's synapses and most
+    smoothing spread it), makes almost no pixel stand beyond all eight neighbours; white speckle
+    at a tenth of a percent of the pixels is counted one for one."""
+    flat = np.full((200, 200), 0.5)
+    spread = np.clip(flat + cv2.GaussianBlur(rng.normal(0, 0.2, flat.shape), (0, 0), 1.0), 0, 1)
+    assert metrics.isolated_outliers(spread, flat, data_range=1.0) < 1e-4
+    specks = flat.copy()
+    where = rng.choice(flat.size, 40, replace=False)
+    specks.flat[where] = rng.choice([0.2, 0.8], 40)
+    inner = np.zeros(flat.shape, bool)
+    inner[1:-1, 1:-1] = True
+    expected = np.count_nonzero(inner.flat[where]) / (198 * 198)
+    assert metrics.isolated_outliers(specks, flat, data_range=1.0) == pytest.approx(expected, rel=0.05)
+
+
+def test_isolated_outliers_refuse_bad_input():
+    with pytest.raises(InputError, match="3x3"):
+        metrics.isolated_outliers(np.zeros((2, 5)), np.zeros((2, 5)), data_range=1.0)
+    with pytest.raises(InputError, match="data_range"):
+        metrics.isolated_outliers(np.full((4, 4), 2.0), np.zeros((4, 4)), data_range=1.0)
