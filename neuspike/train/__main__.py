@@ -39,7 +39,7 @@ SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
 KIND_DEFAULTS: dict[str, dict[str, Any]] = {
     "windows": {},
     "sequences": {"optimizer": "adam", "weight_decay": 0.0, "lr": 2e-4, "lr_min": None, "warmup": 50, "steps": 2000,
-                  "batch": 4, "crop": 96, "val_every": 100, "checkpoint_every": 25, "threads": None, "export": True},
+                  "batch": 4, "crop": 96, "val_every": 100, "checkpoint_every": 25, "threads": None},
 }
 PRESETS: dict[str, dict[str, Any]] = {
     # lr per network size: FireNet's 38k parameters take a larger step than E2VID's 10.7M
@@ -67,7 +67,7 @@ examples (the commands behind the shipped weights are in reports/<network>/READM
   python -m neuspike.train neuspike-net --spec reports/neuspike-net/spec_stage2.json --export
   python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
   python -m neuspike.train e2vid --device cuda            # on a GPU (--device cpu resumes it on a CPU)
-  python -m neuspike.train e2vid --quick --no-export      # a one-minute smoke run"""
+  python -m neuspike.train e2vid --quick                  # a one-minute smoke run (its weights stay in runs/)"""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -190,8 +190,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sequences: share of items with high-dynamic-range radiance (default 0.5)")
     o = p.add_argument_group("output and run")
     o.add_argument("--export", action="store_true",
-                   help="also write the best weights into neuspike/trained/ (the default for sequences)")
-    o.add_argument("--no-export", action="store_true", help="write the best weights into the run folder only")
+                   help="also write the best weights into neuspike/trained/, replacing the shipped ones (never by "
+                   "default, never with --quick)")
+    o.add_argument("--no-export", action="store_true",
+                   help="write the best weights into the run folder only (the default)")
     o.add_argument("--export-dir", help="also write the best weights into this folder (not into neuspike/trained/)")
     o.add_argument("--snapshot-every", type=int, metavar="N",
                    help="also keep every N-th step's weights under RUN/snapshots/")
@@ -281,8 +283,7 @@ def spec_from_args(args: argparse.Namespace):
         if spec.method != args.method:
             raise InputError(f"--spec {args.spec} trains {spec.method!r}, not {args.method!r}")
         top = {k: getattr(args, k) for k in ("device", "threads", "export_dir") if getattr(args, k) is not None}
-        if args.export or args.no_export:
-            top["export"] = bool(args.export)
+        top["export"] = bool(args.export)  # the package's weights change only on --export, whatever the file says
         data = {}
         if args.shard is not None:
             data["shard_dir" if spec.kind == "windows" else "shard_root"] = args.shard
@@ -299,6 +300,9 @@ def spec_from_args(args: argparse.Namespace):
                          f"which trains on {kind}")
     if args.export and args.no_export:
         raise InputError("--export and --no-export: choose one")
+    if args.export and args.quick:
+        raise InputError("--quick trains a smoke-test network, which never replaces the shipped weights: drop "
+                         "--export (or --export-dir FOLDER to keep its weights elsewhere)")
     kw: dict[str, Any] = {**KIND_DEFAULTS[kind], **PRESETS.get(args.method, {})}
     if args.quick:
         kw.update(QUICK, **QUICK_KIND[kind])

@@ -303,3 +303,23 @@ def test_a_spec_file_runs_as_written_and_flags_that_would_change_it_are_refused(
         for flag in flags.split():
             if flag.startswith("--"):
                 assert flag in str(err.value), (flag, str(err.value))
+
+
+def test_training_never_replaces_the_shipped_weights_unless_told_to(tmp_path, capsys):
+    """Every method's default run, a quick run and a spec file that asks for an export in its own
+    text: none writes into the package; only --export does, and a quick run refuses even that."""
+    from neuspike.train.__main__ import build_parser, spec_from_args
+
+    def parse(line: str):
+        return spec_from_args(build_parser().parse_args(line.split()))
+
+    for method in ("neuspike-net", "neuspike-net-spike", "e2vid", "firenet-sim"):
+        assert not parse(method).export
+        assert not parse(f"{method} --quick").export
+    assert main(["e2vid", "--quick", "--export"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "never replaces the shipped weights" in err[0]
+    path = tmp_path / "spec.json"
+    path.write_text(json.dumps({**_tiny_windows(tmp_path, "run").as_dict(), "export": True}))
+    assert not parse(f"neuspike-net --spec {path}").export
+    assert parse(f"neuspike-net --spec {path} --export").export
