@@ -239,9 +239,9 @@ class SweepOutcome:
             lines.append(f"skipped {name}: {reason}")
         if self.time_split:
             sim = self.time_split["simulation_s_per_cell"]
-            per = ", ".join(f"{m} {v:.1f}" for m, v in self.time_split["method_ms_per_frame"].items())
-            head = f"simulation {sim:.3f} s per cell; " if sim == sim else ""  # NaN: nothing was simulated (datasets)
-            lines.append(f"time: {head}methods, median ms per frame: {per}")
+            if sim == sim:  # NaN: nothing was simulated (datasets)
+                lines.append(f"time: simulation {sim:.3f} s per cell")
+            lines += accuracy_and_time_lines(self.time_split)
         if self.n_failed and self.allow_failures:
             lines.append("failures allowed (--allow-failures): see the error column and errors/")
         return "\n".join(lines)
@@ -401,10 +401,29 @@ def _read_json(path: Path) -> dict[str, Any] | None:
         return None
 
 
+def accuracy_and_time_lines(split: dict[str, Any]) -> list[str]:
+    """Each method's mean PSNR and SSIM beside its median ms per frame, fastest first (the sweep's last lines)."""
+    times = split.get("method_ms_per_frame", {})
+    accuracy = split.get("method_accuracy", {})
+    if not times:
+        return []
+    width = max(len("method"), *(len(m) for m in times))
+    lines = ["accuracy and time (mean over the ok cells; ms per frame: median of one reconstruct call, "
+             "a recurrent method's warm-up on its event history included):",
+             f"  {'method':<{width}}  {'PSNR dB':>7}  {'SSIM':>6}  {'ms/frame':>9}"]
+    for m, ms in sorted(times.items(), key=lambda kv: kv[1]):
+        psnr, ssim = accuracy.get(m, (float("nan"), float("nan")))
+        lines.append(f"  {m:<{width}}  {psnr:7.2f}  {ssim:6.4f}  {ms:9.1f}")
+    return lines
+
+
 def _time_split(frame: pd.DataFrame) -> dict[str, Any]:
-    """Where the time went: simulation per cell and each method's median ms per frame."""
+    """Where the time went (simulation per cell, each method's median ms per frame) and what it bought
+    (each method's mean PSNR and SSIM over its ok rows)."""
     if frame.empty:
         return {}
+    ok = frame[frame["status"] == OK]
+    means = {metric: ok[ok["metric"] == metric].groupby("method")["value"].mean() for metric in ("psnr", "ssim")}
     one = frame[frame["metric"] == frame["metric"].iloc[0]]
     sim = one.drop_duplicates("cell")["sim_seconds"].dropna()
     per_method = (one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].median().dropna())
@@ -412,6 +431,8 @@ def _time_split(frame: pd.DataFrame) -> dict[str, Any]:
         "simulation_s_per_cell": float(sim.mean()) if len(sim) else float("nan"),
         "simulation_s_total": float(sim.sum()),
         "method_ms_per_frame": {m: float(v) for m, v in per_method.items()},
+        "method_accuracy": {m: (float(means["psnr"].get(m, float("nan"))), float(means["ssim"].get(m, float("nan"))))
+                            for m in per_method.index},
         "method_s_total": {m: float(v) / 1e3 for m, v in
                            one[one["status"] == OK].groupby("method", sort=True)["ms_per_frame"].sum().items()},
     }

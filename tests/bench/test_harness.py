@@ -181,7 +181,7 @@ def test_tiny_sweep_runs_end_to_end(plugin, tmp_path):
     frame = read_csv(outcome.results_path)
     assert list(frame.columns) == list(COLUMNS)
     assert len(frame) == 4 * 2 * len(METRICS)  # cells x methods x metrics
-    assert sorted(frame["metric"].unique()) == ["psnr", "psnr_affine", "ssim", "ssim_affine", "static_texture"]
+    assert sorted(frame["metric"].unique()) == ["psnr", "psnr_affine", "specks", "ssim", "ssim_affine", "static_texture"]
     # a pan has no static region: the measure is left empty, not made up
     assert frame.loc[frame["metric"] == "static_texture", "value"].isna().all()
     assert set(zip(frame["light"], frame["motion"])) == {(0.25, 8), (0.25, 16), (0.5, 8), (0.5, 16)}
@@ -207,6 +207,12 @@ def test_tiny_sweep_runs_end_to_end(plugin, tmp_path):
     np.testing.assert_allclose(got, expected, rtol=1e-12)
     gains = sorted({g for _, _, g in _unpack_cached(tmp_path / "run" / "cache")})
     assert gains == [0.25, 0.5]
+    # the last lines answer the question: what the accuracy cost, the mean PSNR and SSIM beside the time
+    line = next(x for x in outcome.summary().splitlines() if x.strip().startswith("ht-mean"))
+    psnr, ssim, ms = (float(v) for v in line.split()[1:])
+    assert psnr == pytest.approx(np.mean(expected), abs=0.005)
+    assert ssim == pytest.approx(mean[mean["metric"] == "ssim"]["value"].mean(), abs=5e-5)
+    assert ms == pytest.approx(mean[mean["metric"] == "psnr"]["ms_per_frame"].median(), abs=0.05)
 
     meta = json.loads((tmp_path / "run" / "metadata.json").read_text())
     for key in ("source", "versions", "machine", "threads_per_worker", "start", "end", "executor"):
