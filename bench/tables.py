@@ -251,7 +251,7 @@ def method_summary(frame: pd.DataFrame) -> pd.DataFrame:
         rec: dict[str, Any] = {
             "method": method, "family": fam[method], "inputs": "+".join(sorted(ins[method])),
             "parameters": int(rows["parameters"].max()) if "parameters" in rows and rows["parameters"].notna().any() else 0,
-            "normalisation": ";".join(sorted({str(n) for n in ok.get("normalisation", pd.Series(dtype=str)) if str(n) not in ("", "nan")})),
+            "normalisation": summarise_notes(ok.drop_duplicates(cell_key).get("normalisation", pd.Series(dtype=str))),
             "cells_ok": int((status == OK).sum()), "cells_error": int((status == "error").sum()),
             "cells_skipped": int((status == "skipped").sum()),
         }
@@ -265,6 +265,20 @@ def method_summary(frame: pd.DataFrame) -> pd.DataFrame:
     cols = ["method", "family", "inputs", "parameters", "normalisation", "cells_ok", "cells_error",
             "cells_skipped", *METRICS, "ms_per_frame"]
     return pd.DataFrame(records, columns=cols)
+
+
+def summarise_notes(notes: pd.Series) -> str:
+    """A method's normalisation notes over its cells in one short line: each distinct note once (numbers
+    written ``#``, so "warmed up on 13 of 24 windows" and "... 9 of 24 ..." are one note), with its
+    number of cells where not every cell has it. The detail of each cell stays in ``results.csv``.
+    """
+    texts = [str(n) for n in notes if str(n) not in ("", "nan")]
+    counts: dict[str, int] = {}
+    for text in texts:
+        for part in dict.fromkeys(p.strip() for p in text.split(";") if p.strip()):
+            key = re.sub(r"\b\d+(?:\.\d+)?\b", "#", part)  # standalone numbers only (robust-p99 stays)
+            counts[key] = counts.get(key, 0) + 1
+    return "; ".join(k if n == len(texts) else f"{k} ({n} of {len(texts)} cells)" for k, n in counts.items())
 
 
 def failures_table(frame: pd.DataFrame) -> pd.DataFrame:

@@ -450,3 +450,15 @@ def test_the_light_noise_preset_spans_five_lights_at_four_noise_levels():
     # its noisy cells at L = 1/4 are the noise preset's cells, so one cache serves both
     noise_ids = {repr(c.identity()) for c in grids.preset("noise", full=True).cells()}
     assert noise_ids <= {repr(c.identity()) for c in g.cells()}
+
+
+def test_the_methods_table_summarises_each_methods_notes_in_one_short_cell():
+    """A recurrent method's per-cell warm-up notes become one note with its cell count (they had joined
+    into 250 characters that printed over other rows); every cell's own note stays in the CSV."""
+    notes = ["clamp; short history: warmed up on 13 of 24 windows", "clamp; short history: warmed up on 9 of 24 windows",
+             "clamp", "clamp"]
+    rows = [dict(row("tfi", metric=m, value=1.0, light=light), normalisation=note)
+            for light, note in zip(LIGHTS, notes) for m in ("psnr", "ssim")]
+    summary = tb.method_summary(rows_frame(rows))
+    assert summary.loc[0, "normalisation"] == "clamp; short history: warmed up on # of # windows (2 of 4 cells)"
+    assert tb.summarise_notes(pd.Series(["robust-p99", "robust-p99"])) == "robust-p99"
