@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from neuspike.utils.checks import check_nonnegative, check_positive, parse_size
-from neuspike.conditions import NOISE_LEVELS, Condition, parse_effects
+from neuspike.conditions import EFFECT_DEFAULTS, EVENTS, NOISE_LEVELS, SPIKES, Condition, parse_effects
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.streams import VIDAR_PLANE_RATE_HZ
 
@@ -69,8 +69,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--motion", type=int, default=128, help="motion scale S in 16..256 (default: 128; window mode)")
     p.add_argument("--noise", choices=list(NOISE_LEVELS), default="none",
                    help="the paper's noise level (default: none = no noise stage runs)")
-    p.add_argument("--effects", default="",
-                   help="extra stages, e.g. 'threshold_mismatch:sigma=0.05,refractory:period_s=5e-4,shot_noise:rate_hz=5'")
+    p.add_argument("--effects",
+                   help="extra stages, e.g. 'threshold_mismatch:sigma=0.05,refractory:period_s=5e-4,shot_noise:rate_hz=5'; "
+                   f"spike camera: {', '.join(n for n, (m, _) in EFFECT_DEFAULTS.items() if m == SPIKES)}; "
+                   f"event camera: {', '.join(n for n, (m, _) in EFFECT_DEFAULTS.items() if m == EVENTS)} "
+                   "(an effect of a camera that --modalities leaves out is refused)")
     p.add_argument("--size", type=_parse_size, help="sensor size WxH (default: 400x250; a video's own size for --video)")
     p.add_argument("--planes", type=int, default=256, help="spike planes per window T (default: 256)")
     p.add_argument("--plane-rate", type=float, default=VIDAR_PLANE_RATE_HZ,
@@ -128,6 +131,22 @@ def _sequence_span(args: argparse.Namespace, sensor: Any, scene: Any = None) -> 
     return start, sensor.planes / sensor.plane_rate_hz * args.time_scale
 
 
+def _declared_effects(text: str | None, modalities: frozenset[str]) -> tuple[Any, ...]:
+    """``--effects`` parsed; an empty one, or an effect of a camera that is not simulated, is refused."""
+    if text is None:
+        return ()
+    if not text.strip():
+        raise InputError("--effects: empty; leave the option out for no extra stages")
+    effects = parse_effects(text)
+    idle = [e.name for e in effects if e.modality not in modalities]
+    if idle:
+        camera = {SPIKES: "spike", EVENTS: "event"}
+        names = ", ".join(f"{n} ({camera[EFFECT_DEFAULTS[n][0]]} camera)" for n in idle)
+        raise InputError(f"--effects: {names} would not run: --modalities {','.join(sorted(modalities))} does not "
+                         f"simulate that camera (simulate only the effects a scene calls for)")
+    return effects
+
+
 def _check_work(args: argparse.Namespace, out: Path, mode: str, size: tuple[int, int], *, sensor: Any,
                 condition: Condition, modalities: frozenset[str], scene: Any = None) -> None:
     """Refuse, before any work, a simulation whose memory, disk or largest file cannot fit (naming the size)."""
@@ -169,7 +188,8 @@ def _run(args: argparse.Namespace) -> int:
     modalities = check_modalities(m.strip() for m in args.modalities.split(",") if m.strip())
     sensor = SensorConfig(planes=args.planes, plane_rate_hz=args.plane_rate, spike_threshold=args.threshold,
                           event_threshold=args.event_threshold)
-    condition = Condition(light=args.light, motion=args.motion, noise=args.noise, effects=parse_effects(args.effects))
+    condition = Condition(light=args.light, motion=args.motion, noise=args.noise,
+                          effects=_declared_effects(args.effects, modalities))
     size = args.size or (None if args.video else (400, 250))
     if size is not None:
         _check_work(args, out, mode, size, sensor=sensor, condition=condition, modalities=modalities)

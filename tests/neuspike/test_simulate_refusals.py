@@ -233,3 +233,17 @@ def test_a_sweep_too_large_for_memory_is_refused_before_any_cell(tmp_path, capsy
     assert "Traceback" not in stderr
     assert len(err) == 1 and "at 100000x100000 would need about" in err[0] and "TiB of memory" in err[0], err
     assert not (tmp_path / "sweep" / "results.csv").exists()
+
+
+@pytest.mark.parametrize("effects, modalities, message", [
+    ("leak:rate_hz=1000", "spikes", "leak (event camera) would not run: --modalities spikes"),
+    ("dark_current", "events", "dark_current (spike camera) would not run: --modalities events"),
+    ("", "spikes,events", "--effects: empty"),
+    ("  ", "spikes", "--effects: empty"),
+])
+def test_an_effect_no_requested_camera_runs_is_refused(tmp_path, capsys, no_simulation, effects, modalities, message):
+    """Simulate only the effects a scene calls for, and say so: a declared stage that would do nothing."""
+    out = tmp_path / "rec"
+    assert main([*SMALL, "--effects", effects, "--modalities", modalities, "--out", str(out)]) == 2
+    assert message in _one_line_error(capsys)
+    assert not out.exists()
