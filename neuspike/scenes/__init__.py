@@ -21,6 +21,7 @@ _EXPORTS = {
     "FAN_HUB_FRACTION": "neuspike.scenes.fan",
     "FAN_TIP_FRACTION": "neuspike.scenes.fan",
     "FanScene": "neuspike.scenes.fan",
+    "HELDOUT_PICTURES": "neuspike.scenes.photos",
     "IMAGE_SUFFIXES": "neuspike.scenes.photos",
     "KINDS": "neuspike.scenes.spec",
     "MAX_ZOOM_EXPONENT": "neuspike.scenes.spec",

@@ -11,7 +11,9 @@ astronomy, scanned text) that ship inside scikit-image and load without a downlo
 pictures (``checkerboard``, ``colorwheel``, ``horse``, ``logo``, ``shepp_logan_phantom``) and the
 duplicate ``chelsea`` (= ``cat``) are left out. The split is fixed: learned methods train only on
 :data:`TRAIN_PHOTOS`; :data:`TEST_PHOTOS` (which holds ``camera``, the standard benchmark input) is
-for evaluation only. Each half mixes scenes, textures and micrographs.
+for evaluation only. Each half mixes scenes, textures and micrographs. :data:`HELDOUT_PICTURES`
+(:mod:`neuspike.scenes.heldout`: a portrait, terrain, type, a night street, foliage) are a third
+set, named the same way, for the held-out report; like the test photographs they are never trained on.
 
 Cover and crop
 --------------
@@ -32,6 +34,7 @@ import cv2
 import numpy as np
 
 from neuspike.errors import InputError, SourceError
+from neuspike.scenes.heldout import HELDOUT_LOADERS
 
 
 def _skimage(name: str, pick: int | None = None) -> Callable[[], np.ndarray]:
@@ -69,6 +72,10 @@ _LOADERS: Mapping[str, Callable[[], np.ndarray]] = MappingProxyType({
 
 #: Every bundled photograph's name.
 BUNDLED_PHOTOS: tuple[str, ...] = tuple(_LOADERS)
+#: The held-out pictures (:mod:`neuspike.scenes.heldout`), named like the bundled photographs: neither
+#: trained nor selected on, and not in the sweeps' test set.
+HELDOUT_PICTURES: tuple[str, ...] = tuple(HELDOUT_LOADERS)
+_PICTURES: Mapping[str, Callable[[], np.ndarray]] = MappingProxyType({**_LOADERS, **HELDOUT_LOADERS})
 
 #: The photographs learned methods may train on.
 TRAIN_PHOTOS: tuple[str, ...] = (
@@ -175,10 +182,11 @@ def read_image_file(path: str | os.PathLike) -> np.ndarray:
     return luma(decoded, channel_order="bgr", source=str(p))
 
 
-@functools.lru_cache(maxsize=len(_LOADERS))
+@functools.lru_cache(maxsize=len(_PICTURES))
 def _bundled_luma(name: str) -> np.ndarray:
-    """A bundled photograph's luma, decoded once per process (every simulated window reads one)."""
-    image = luma(_LOADERS[name](), channel_order="rgb", source=name)
+    """A bundled photograph's (or held-out picture's) luma, decoded once per process (every simulated
+    window reads one)."""
+    image = luma(_PICTURES[name](), channel_order="rgb", source=name)
     image.flags.writeable = False
     return image
 
@@ -197,12 +205,13 @@ def read_photo(name_or_path: str | os.PathLike) -> np.ndarray:
     InputError
         For decoded content that is not a valid image.
     """
-    if isinstance(name_or_path, str) and name_or_path in _LOADERS:
+    if isinstance(name_or_path, str) and name_or_path in _PICTURES:
         return _bundled_luma(name_or_path).copy()
     try:
         return read_image_file(name_or_path)
     except SourceError as exc:
-        raise SourceError(f"{exc}; bundled photographs are {', '.join(BUNDLED_PHOTOS)}") from None
+        raise SourceError(f"{exc}; bundled photographs are {', '.join(BUNDLED_PHOTOS)}; held-out pictures "
+                          f"{', '.join(HELDOUT_PICTURES)}") from None
 
 
 def cover_size(source_hw: tuple[int, int], size: tuple[int, int]) -> tuple[int, int]:

@@ -58,13 +58,13 @@ def _whole(name: str, value: Any, minimum: int) -> int:
 
 
 def _check_photos(photos: Any) -> tuple[str, ...]:
-    from neuspike.scenes.photos import TEST_PHOTOS, TRAIN_PHOTOS
+    from neuspike.scenes.photos import HELDOUT_PICTURES, TEST_PHOTOS, TRAIN_PHOTOS
 
     photos = tuple(photos)
-    refused = [p for p in photos if p in TEST_PHOTOS]
+    refused = [p for p in photos if p in TEST_PHOTOS or p in HELDOUT_PICTURES]
     if refused:
-        raise InputError(f"photos: {refused} are test photographs (evaluation only); training may use only "
-                         f"{', '.join(TRAIN_PHOTOS)}")
+        raise InputError(f"photos: {refused} are test photographs or held-out pictures (evaluation only); "
+                         f"training may use only {', '.join(TRAIN_PHOTOS)}")
     unknown = [p for p in photos if p not in TRAIN_PHOTOS]
     if unknown:
         raise InputError(f"photos: {unknown} are not training photographs ({', '.join(TRAIN_PHOTOS)})")

@@ -112,8 +112,31 @@ def test_split_is_fixed_disjoint_and_complete():
     assert len(TRAIN_PHOTOS) >= len(BUNDLED_PHOTOS) // 2
 
 
+def test_held_out_pictures_are_a_third_set_that_loads_the_same_on_every_call():
+    from neuspike.scenes import HELDOUT_PICTURES
+    from neuspike.scenes.photos import read_photo
+
+    assert set(HELDOUT_PICTURES).isdisjoint(set(BUNDLED_PHOTOS))
+    assert set(HELDOUT_PICTURES) == {"portrait", "terrain", "typeset", "night", "foliage"}
+    for name in HELDOUT_PICTURES:
+        image = read_photo(name)
+        assert image.shape[0] >= 400 and image.shape[1] >= 512, name  # the 400x250 view is never enlarged
+        np.testing.assert_array_equal(image, read_photo(name))
+    night = read_photo("night")
+    assert np.mean(night < 0.1) > 0.8 and night.max() == 1.0  # dark, with lamps at white
+
+
+def test_training_refuses_the_held_out_pictures():
+    from neuspike.train.spec import _check_photos
+
+    with pytest.raises(InputError, match="held-out"):
+        _check_photos(["astronaut", "portrait"])
+
+
 def test_every_bundled_photo_loads_as_luma():
-    for name in BUNDLED_PHOTOS:
+    from neuspike.scenes import HELDOUT_PICTURES
+
+    for name in BUNDLED_PHOTOS + HELDOUT_PICTURES:
         image = load_photo(name, (64, 40))
         assert image.shape == (40, 64) and image.dtype == np.float32, name
         assert 0.0 <= image.min() and image.max() <= 1.0, name
