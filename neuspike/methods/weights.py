@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -187,7 +188,14 @@ def load_torch_state(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     except FileNotFoundError:
         raise
     except Exception as exc:
-        raise FormatError(f"{path}: cannot be read as a weights-only torch file ({type(exc).__name__}: {exc})") from exc
+        # torch's own message runs to many lines and advises loading with weights_only=False, which would
+        # run whatever code the file carries: keep only its first line and never pass that advice on
+        first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "")
+        if "weights_only" in first or "Weights only load failed" in first:
+            detail = re.search(r"WeightsUnpickler error:\s*(Unsupported global: GLOBAL \S+|[^.\n]*)", str(exc))
+            first = "not tensors only" + (f": {detail.group(1).strip()}" if detail and detail.group(1).strip() else "")
+        raise FormatError(f"{path}: cannot be read as a weights-only torch file ({type(exc).__name__}: "
+                          f"{first}); only tensors are loaded") from exc
     state = checkpoint.get("state_dict", checkpoint) if isinstance(checkpoint, dict) else None
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise FormatError(f"{path}: expected a dictionary of tensors (optionally under 'state_dict')")

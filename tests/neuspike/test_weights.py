@@ -71,3 +71,26 @@ def test_for_training_builds_through_the_constructor_without_weights():
     shipped = create("firenet-sim")
     assert shipped.layout == "safetensors" and shipped.module.encoder.weight.is_contiguous(
         memory_format=torch.channels_last)
+
+
+class _NotATensor:
+    pass
+
+
+def test_a_pickle_that_is_not_tensors_is_refused_in_one_line_without_torchs_unsafe_advice(tmp_path):
+    """torch's message is many lines and advises weights_only=False (which runs the file's code):
+    the error keeps one line, names what is wrong, and never passes that advice on."""
+    from neuspike.errors import FormatError
+    from neuspike.methods.weights import load_torch_state
+
+    objects, garbage = tmp_path / "objects.pt", tmp_path / "garbage.pt"
+    torch.save({"state_dict": {"w": _NotATensor()}}, objects)
+    garbage.write_bytes(b"not a torch file at all")
+    for path in (objects, garbage):
+        with pytest.raises(FormatError) as err:
+            load_torch_state(path)
+        text = str(err.value)
+        assert "\n" not in text and "weights_only=False" not in text and "weights_only` set to `False" not in text
+        assert str(path) in text and "only tensors are loaded" in text
+    with pytest.raises(FormatError, match="_NotATensor"):
+        load_torch_state(objects)
