@@ -401,6 +401,27 @@ def _read_json(path: Path) -> dict[str, Any] | None:
         return None
 
 
+class ProgressLines:
+    """Progress as plain lines for a stream that is not a terminal (a log file, a pipe): one line at
+    most every ``every_s`` seconds and one at the end, with the time left at the rate so far."""
+
+    def __init__(self, label: str, total: int, initial: int, *, every_s: float = 30.0, stream: Any = None) -> None:
+        self.label, self.total, self.initial, self.every_s = label, total, initial, every_s
+        self.stream = stream if stream is not None else sys.stderr
+        self.start = self.last = time.monotonic()
+
+    def update(self, finished: int, failed: int) -> None:
+        now = time.monotonic()
+        if now - self.last < self.every_s and finished < self.total:
+            return
+        self.last = now
+        rate = (finished - self.initial) / max(now - self.start, 1e-9)
+        left = (self.total - finished) / rate if rate > 0 else float("nan")
+        eta = "" if finished >= self.total or left != left else f", about {max(left, 1) / 60:.0f} min left"
+        print(f"{self.label}: {finished} of {self.total} cells finished ({failed} failed){eta}",
+              file=self.stream, flush=True)
+
+
 def accuracy_and_time_lines(split: dict[str, Any]) -> list[str]:
     """Each method's mean PSNR and SSIM beside its median ms per frame, fastest first (the sweep's last lines)."""
     times = split.get("method_ms_per_frame", {})
@@ -691,6 +712,9 @@ def run_tasks(
         bar.set_postfix(done=len(done), failed=n_done_failed + n_failed_now + len(crashed),
                         remaining=len(tasks) - len(done) - len(crashed), refresh=False)
 
+    # no bar because stderr is a file or a pipe (not because --no-progress): a plain line now and then
+    plain = ProgressLines(label, len(tasks), len(done)) if execution.progress is None and bar.disable else None
+
     postfix()
     try:
         with (executor if todo else contextlib.nullcontext()):
@@ -719,6 +743,8 @@ def run_tasks(
                     watch.read()
                 postfix()
                 bar.update(1)
+                if plain is not None:
+                    plain.update(len(done) + len(crashed), n_done_failed + n_failed_now + len(crashed))
     finally:
         bar.close()
 

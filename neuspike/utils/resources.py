@@ -75,7 +75,10 @@ def default_threads(workers: int = 1) -> tuple[int, str | None]:
     threads = max(1, free // max(1, int(workers)))
     note = None
     if busy:
-        note = (f"other processes keep {busy} of {usable_cpus()} usable CPU(s) busy: {threads} torch thread(s)"
+        usable = usable_cpus()
+        held = (f"{busy} of the {usable} usable CPUs" if busy < usable
+                else f"all {usable} usable CPUs (their load is {busy})")
+        note = (f"other processes keep {held} busy: {threads} torch thread(s)"
                 + (" per worker" if workers > 1 else ""))
     return threads, note
 

@@ -528,3 +528,21 @@ def test_merge_take_reads_only_the_named_methods_from_later_folders(plugin, tmp_
     same_numbers(x2, old[old["method"] == "ht-mean-x2"].reset_index(drop=True))
     assert len(merged) == len(old)
     assert json.loads((tmp_path / "m" / "config.json").read_text())["sweep"]["methods"] == ["ht-mean", "ht-mean-x2"]
+
+
+def test_progress_on_a_log_file_is_a_plain_line_now_and_then():
+    """No terminal, no bar: a line at most every N seconds and one at the end, with the time left."""
+    import io
+
+    from bench.harness import ProgressLines
+
+    stream = io.StringIO()
+    lines = ProgressLines("light", 10, 2, every_s=3600.0, stream=stream)
+    for finished in range(3, 10):
+        lines.update(finished, 0)
+    assert stream.getvalue() == ""  # within the interval: quiet
+    lines.update(10, 1)
+    assert stream.getvalue() == "light: 10 of 10 cells finished (1 failed)\n"
+    eager = ProgressLines("noise", 4, 0, every_s=0.0, stream=stream)
+    eager.update(1, 0)
+    assert stream.getvalue().splitlines()[-1].startswith("noise: 1 of 4 cells finished (0 failed), about ")

@@ -159,7 +159,10 @@ def test_default_threads_leave_the_cpus_other_processes_keep_busy(monkeypatch):
         monkeypatch.setattr(resources, "others_busy_cpus", lambda busy=busy: busy)
         threads, note = resources.default_threads(workers)
         assert threads == expected, (busy, workers)
-        assert (note is not None) == bool(busy) and (not busy or f"{busy} of 8 usable CPU(s) busy" in note)
+        assert (note is not None) == bool(busy)
+        if busy:  # never "12 of 8 CPUs": a load beyond the CPUs is said as such
+            assert (f"{busy} of the 8 usable CPUs busy" in note) if busy < 8 else (
+                f"all 8 usable CPUs (their load is {busy}) busy" in note)
 
 
 def test_commands_announce_a_reduced_thread_default_on_stderr(monkeypatch, capsys):
@@ -171,7 +174,7 @@ def test_commands_announce_a_reduced_thread_default_on_stderr(monkeypatch, capsy
     monkeypatch.setattr(resources, "others_busy_cpus", lambda: 1)
     assert resources.announce_default_threads(1) == 3
     err = capsys.readouterr().err
-    assert "1 of 4 usable CPU(s) busy" in err and "(--threads overrides)" in err
+    assert "1 of the 4 usable CPUs busy" in err and "(--threads overrides)" in err
     monkeypatch.setattr(resources, "others_busy_cpus", lambda: 0)
     assert resources.announce_default_threads(2) == 2
     assert capsys.readouterr().err == ""
