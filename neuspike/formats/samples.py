@@ -293,9 +293,13 @@ def stream_samples(
             info.update(window_planes_in_file=[w0, w1], key_plane_in_file=key_plane, file_planes=total)
             if planes is not None:
                 block = planes.get(w0, w1)
+                meta: dict[str, Any] = {"source": str(recording.spikes_path)}
+                if w0 == 0 and isinstance((recording.meta or {}).get("stages"), list):
+                    # a simulation's first planes: how its sensor started is part of what it counts
+                    meta["stages"] = [st for st in recording.meta["stages"]
+                                      if isinstance(st, dict) and st.get("modality", "spikes") == "spikes"]
                 spikes = SpikeStream(block, plane_rate_hz=rate, start_s=w_start, gain=recording.gain,
-                                     threshold=recording.threshold, dark_rate=recording.dark_rate,
-                                     meta={"source": str(recording.spikes_path)})
+                                     threshold=recording.threshold, dark_rate=recording.dark_rate, meta=meta)
         else:
             half = window_planes / rate / 2.0
             w_start, w_end = t - half, t + half

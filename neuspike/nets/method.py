@@ -28,6 +28,7 @@ from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESEN
                                            key_representation, spike_gain, spike_quantum, spike_representation)
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
+from neuspike.methods.counting import initial_state, level_shift
 from neuspike.methods.normalisation import dark_level
 from neuspike.nets.sliding import SlidingRepresentation
 
@@ -155,11 +156,12 @@ class NeuSpikeNetMethod(LearnedMethod):
         the key instant appended to the spike input and weighed by
         :class:`~neuspike.nets.network.KeyRefine` (``"support-count"`` head only).
     level : str
-        ``"counts"`` (default): the image is shifted so that its mean equals the mean radiance
-        counted from the spikes (:func:`count_level`), where the sensor's gain and dark rate are
-        known, and left as the network made it otherwise; ``"network"``: never shifted. The shift
-        removes the offset that instance normalisation leaves to the network's guess: under a dark
-        current, which clean windows cannot be told apart from, up to several dB.
+        ``"counts"`` (default): where the sensor's gain is known, the image is shifted so that the
+        spikes it predicts, pixel by pixel under the sensor model of how the window began
+        (:mod:`neuspike.methods.counting`, with the dark rate known or estimated), add up to the
+        spikes the window holds; left as the network made it otherwise. ``"network"``: never
+        shifted. The shift removes the offset that instance normalisation leaves to the network's
+        guess: under a dark current, which clean windows cannot be told apart from, up to several dB.
     **learned
         :class:`~neuspike.methods.learned.LearnedMethod`'s arguments (weights, device, precision).
     """
@@ -251,11 +253,20 @@ class NeuSpikeNetMethod(LearnedMethod):
             self._sliding.reset()
 
     def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:
-        """The clamped output, shifted to the counted mean level (``level="counts"``, where known)."""
+        """The clamped output, shifted so that it predicts the window's spike count (``level="counts"``,
+        where the gain is known): :func:`neuspike.methods.counting.level_shift` under the sensor model of
+        how the window began."""
         image = super().to_image(output, sample)
-        self._level = count_level(sample) if self.params.get("level", "counts") == "counts" else None
-        if self._level is not None:
-            image = np.clip(image + np.float32(self._level - image.mean(dtype=np.float64)), 0.0, 1.0)
+        self._level = None
+        spikes = sample.spikes
+        if self.params.get("level", "counts") != "counts" or spikes is None or spike_gain(sample)[1] != "known":
+            return image
+        dark_rate, _ = dark_level(spikes)
+        counts = np.count_nonzero(spikes.planes, axis=0)
+        shift = level_shift(image, counts, planes=spikes.num_planes, gain=float(spikes.gain), dark_rate=dark_rate,
+                            state=initial_state(spikes))
+        image = np.clip(image + np.float32(shift), 0.0, 1.0)
+        self._level = float(image.mean(dtype=np.float64))
         return image
 
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:

@@ -130,3 +130,7 @@ def test_a_simulated_window_records_its_dark_rate_and_files_carry_it(tmp_path):
     assert json.loads((clean / "meta.json").read_text())["dark_rate"] == 0.0
     sample = load_sample(spikes=noisy / "spikes.dat")
     assert sample.spikes.dark_rate == pytest.approx(meta["dark_rate"])
+    # and how its sensor started (Algorithm 1's random charge), which the counted level's model needs
+    from neuspike.methods.counting import initial_state
+
+    assert initial_state(sample.spikes) == "normal"
