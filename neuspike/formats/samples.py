@@ -280,7 +280,8 @@ def stream_samples(
     history = check_nonnegative("event_history_s", event_history_s)
     times = _check_times(times_s, recording)
     rate, total = recording.plane_rate_hz, recording.num_planes
-    planes = _PlaneBuffer(recording, window_planes) if "spikes" in want else None
+    # a window longer than the file is the whole file (window_bounds): the buffer never needs more
+    planes = _PlaneBuffer(recording, min(window_planes, max(total, 1))) if "spikes" in want else None
     events = _EventBuffer(recording) if "events" in want else None
     for k, t in enumerate(times):
         t = float(t)

@@ -234,3 +234,14 @@ def test_real_event_sample_takes_a_window_at_the_centre():
     assert (s.width, s.height) == (346, 260)
     assert s.window_end_s - s.window_start_s == pytest.approx(256 / 20_000.0)
     assert 2.8 < s.key_time_s < 4.1 and len(s.window_events()) > 0
+
+
+def test_a_window_longer_than_the_file_reads_the_file_whole_without_a_huge_buffer(tmp_path):
+    """A window of 10**12 planes on a 256-plane file: the whole file, read at once (the buffer had
+    been sized to twice the window, a 1 PiB MemoryError on every row of a dataset)."""
+    from neuspike.formats.samples import load_sample
+    from neuspike.simulate import main as simulate
+
+    assert simulate(["--size", "48x32", "--modalities", "spikes", "--out", str(tmp_path / "rec")]) == 0
+    sample = load_sample(spikes=tmp_path / "rec" / "spikes.dat", window_planes=10**12)
+    assert sample.spikes.planes.shape == (256, 32, 48)
