@@ -452,6 +452,9 @@ def open_recording(
     sp = Path(spikes) if spikes is not None else None
     ev = Path(events) if events is not None else None
     for kind, f in (("spike", sp), ("event", ev)):
+        if f is not None and f.is_dir():
+            raise SourceError(f"{kind} file {f}: is a folder, not a file (a simulated recording's folder is "
+                              f"given as the recording itself, without --{kind}s)")
         if f is not None and not f.is_file():
             raise SourceError(f"{kind} file {f}: no such file")
     if sp is not None and sp.suffix.lower() not in SPIKE_SUFFIXES:

@@ -77,6 +77,9 @@ def test_needs_some_input_and_one_key_instant(tmp_path):
         load_sample()
     with pytest.raises(SourceError, match="no such file"):
         load_sample(spikes=tmp_path / "absent.npz")
+    (tmp_path / "folder.dat").mkdir()
+    with pytest.raises(SourceError, match="is a folder, not a file"):
+        load_sample(spikes=tmp_path / "folder.dat")
     f = tmp_path / "x.npz"
     f.write_bytes(b"")
     with pytest.raises(InputError, match="not both"):
