@@ -1,0 +1,107 @@
+"""One-page model cards for the networks trained here, from their JSON cards and the committed reports.
+
+    python reports/cards.py            # writes neuspike/trained/<network>.md for every shipped network
+
+Each card says what the network is, the file and its sha256, how it was trained (the recipe and the
+command, from the JSON card beside the weights: its ``training.spec`` is the spec of the last stage
+and ``training.commit`` the code that ran it), its data, and its scores: the mean PSNR and SSIM over
+the cells of every committed sweep and of the held-out report, beside the best rival: the method,
+not trained here, with the best mean SSIM among those that read no input the network does not read. The held-out report's pictures were never trained or selected on.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+TRAINED = ROOT / "neuspike" / "trained"
+NETWORKS = ("neuspike-net", "neuspike-net-spike", "e2vid", "firenet-sim")
+OURS = set(NETWORKS)
+#: (label, results folder, what it holds)
+REPORTS = (
+    ("light sweep", "reports/light", "test photographs, L 1/32 to 1/2, S 128, no noise"),
+    ("motion sweep", "reports/motion", "test photographs, S 16 to 256, L 1/4, no noise"),
+    ("noise sweep", "reports/noise", "test photographs, noise small to high, L 1/4, S 128"),
+    ("light x noise", "reports/light-noise", "test photographs, five light scales x four noise levels"),
+    ("held-out, light x noise", "reports/heldout/light-noise", "held-out pictures, five light scales x four noise levels"),
+    ("held-out, fast pans", "reports/heldout/fast-motion", "held-out pictures, pans 1x to 16x, L 1/4 and 1/16, S 256"),
+)
+
+
+def _means(folder: Path) -> pd.DataFrame | None:
+    path = folder / "results.csv"
+    if not path.is_file():
+        return None
+    frame = pd.read_csv(path)
+    ok = frame[(frame["status"] == "ok") & frame["metric"].isin(["psnr", "ssim"])]
+    means = ok.groupby(["method", "metric"])["value"].mean().unstack("metric")
+    means["inputs"] = ok.groupby("method")["inputs"].first()
+    return means
+
+
+def _scores(name: str) -> list[str]:
+    rows = ["| report | what | PSNR / SSIM | best rival (by SSIM) | its PSNR / SSIM |", "|---|---|---:|---|---:|"]
+    for label, folder, what in REPORTS:
+        means = _means(ROOT / folder)
+        if means is None or name not in means.index:
+            continue
+        # the rivals: methods that are not trained here and read nothing this network does not read
+        ours = set(str(means.loc[name, "inputs"]).split("+"))
+        others = means.loc[[m for m in means.index
+                            if m not in OURS and set(str(means.loc[m, "inputs"]).split("+")) <= ours]]
+        best = others["ssim"].idxmax() if len(others) else None
+        theirs = (f"{others.loc[best, 'psnr']:.2f} / {others.loc[best, 'ssim']:.3f}" if best is not None else "-")
+        rows.append(f"| [{label}](../../{folder}) | {what} | {means.loc[name, 'psnr']:.2f} / "
+                    f"{means.loc[name, 'ssim']:.3f} | `{best}` | {theirs} |")
+    return rows
+
+
+def card(name: str) -> str:
+    meta = json.loads((TRAINED / f"{name}.json").read_text())
+    training, data = meta.get("training", {}), meta.get("data", {})
+    model = meta.get("model", {})
+    lines = [
+        f"# `{name}`: model card",
+        "",
+        f"**What:** `{model.get('class', '?')}` with {meta.get('parameters', 0):,} parameters "
+        f"({json.dumps(model.get('params', {}), sort_keys=True)}).",
+        f"**File:** `{name}.safetensors`, {meta.get('dtype', '?')}, sha256 `{meta.get('sha256', '?')}`; its JSON "
+        f"card `{name}.json` holds the full training record.",
+        "",
+        "**Recipe:** " + (" → ".join(f"stage {s['stage']} ({s['steps']} steps)" for s in meta["stages"])
+                          if meta.get("stages") else f"{training.get('step', '?')} steps")
+        + f"; the last stage ran at commit `{str(training.get('commit', '?'))[:12]}` on {training.get('device', '?')} "
+          f"in {training.get('precision', '?')} ({float(training.get('wall_s', 0)) / 60:.0f} min).",
+        f"**Command:** `python -m neuspike.train {name} --spec spec.json`, the spec written out of the JSON card "
+        f"with `python -c \"import json; print(json.dumps(json.load(open('neuspike/trained/{name}.json'))['training']"
+        f"['spec']))\" > spec.json`. A run writes into `runs/` only; `--export` replaces this file.",
+        f"**Data:** simulated {data.get('kind', '?')} from the training photographs "
+        f"({', '.join(data.get('photos', []))})" + (f" and procedural {data['procedural']}" if data.get("procedural") else "")
+        + (f" (scene kinds {', '.join(dict.fromkeys(data['kinds']))})" if data.get("kinds") else "")
+        + f"; {data.get('train_items', '?')} training and {data.get('val_items', '?')} validation items. "
+          "No test photograph or held-out picture is ever drawn.",
+        f"**Chosen by:** {meta.get('selection', 'the best validation score on the training photographs')}"
+        .rstrip(".") + ".",
+        "",
+        "**Scores** (mean over each report's ok cells; regenerated by `python reports/cards.py`):",
+        "",
+        *_scores(name),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    names = argv or list(NETWORKS)
+    for name in names:
+        (TRAINED / f"{name}.md").write_text(card(name))
+        print(f"wrote neuspike/trained/{name}.md")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
