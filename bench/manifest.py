@@ -341,6 +341,10 @@ def _is_event_file(path: Path) -> bool:
     return path.suffix.lower() != ".txt" or path.name not in ("calib.txt",)
 
 
+#: The subfolders each layout reads.
+_LAYOUT_FOLDERS = {"spike-gt": ("spike", "gt"), "events-frames": ("images",), "files": ("spike", "events")}
+
+
 def detect_layout(folder: Path) -> str:
     """The layout of ``folder`` (one of :data:`LAYOUTS`).
 
@@ -401,6 +405,12 @@ def infer_manifest(folder: str | os.PathLike, *, layout: str = "auto", gain: flo
         recordings = _infer_files(root, gain, common, height, width)
     if not recordings:
         raise InputError(f"dataset {root}: no recording found for the {layout} layout")
+    used = _LAYOUT_FOLDERS[layout]
+    for sub in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        if sub.name not in used:  # said, not skipped silently
+            hint = (" (a video is a scene for the simulator: python -m neuspike.simulate --video FOLDER)"
+                    if sub.name in ("video", "videos") else "")
+            notes.append(f"{sub.name}/ is not read by the {layout} layout{hint}")
     return Manifest(layout=layout, recordings=tuple(parse_recording(r, i) for i, r in enumerate(recordings)),
                     notes=tuple(notes))
 

@@ -276,3 +276,15 @@ def test_events_frames_picks_the_file_called_events(events_frames, tmp_path):
     (root / "events.h5").rename(root / "dvs.h5")
     with pytest.raises(mf.InputError, match="exactly one event file beside images/, found dvs.h5, imu.txt"):
         mf.infer_manifest(root)
+
+
+def test_a_folder_the_layout_does_not_read_is_said_not_skipped_silently(spike_gt, tmp_path):
+    root = tmp_path / "data"
+    shutil.copytree(spike_gt, root)
+    (root / "video").mkdir()
+    (root / "notes").mkdir()
+    manifest = mf.infer_manifest(root)
+    assert manifest.layout == "spike-gt" and len(manifest.recordings) == 2
+    said = [n for n in manifest.notes if "is not read" in n]
+    assert len(said) == 2 and said[1].startswith("video/") and "neuspike.simulate --video" in said[1]
+    assert said[0] == "notes/ is not read by the spike-gt layout"
