@@ -113,7 +113,7 @@ def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
     load_plugins(plugin_names(tuple(args.plugin)))
     for problem in registry.load_entry_points():
         print(f"warning: a method plug-in failed to load: {problem}", file=sys.stderr)
-    if args.methods:
+    if args.methods is not None:  # an empty --methods is an error, not "every method"
         names = grids.parse_list(args.methods)
         for name in names:
             registry.entry(name)  # unknown names raise here, with the list of known ones
