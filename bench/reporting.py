@@ -4,7 +4,8 @@ Nothing is simulated and no method runs: the report reads only the files of the 
 be rebuilt at any time, on any machine, and gives the same tables byte for byte.
 
 Inputs (in ``RESULTS_DIR``; each optional, at least one of the first two)
-    ``results.csv``            a sweep's long results (:mod:`bench.results`)
+    ``results.csv``            a sweep's long results (:mod:`bench.results`); a committed report may
+                               keep it gzipped as ``results.csv.gz`` (read when ``results.csv`` is absent)
     ``timing.csv``             Table 2 rows written by :mod:`bench.timing`
     ``accuracy_vs_time.csv``   accuracy-versus-time points joined by :mod:`bench.timing`
     ``config.json``, ``metadata.json``  what ran and where (shown on the title page)
@@ -150,6 +151,14 @@ def _read_json(path: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def results_file(folder: str | os.PathLike) -> Path:
+    """A folder's ``results.csv``, or its gzipped ``results.csv.gz`` where only that is there (a
+    committed report keeps its long results compressed: a 29 MB table is 1.1 MB gzipped)."""
+    plain = Path(folder) / "results.csv"
+    packed = plain.with_name("results.csv.gz")
+    return packed if not plain.exists() and packed.exists() else plain
+
+
 def read_results(path: Path) -> pd.DataFrame:
     """``results.csv`` with the harness's dtypes (:func:`bench.results.read_csv`)."""
     from bench.results import read_csv
@@ -168,7 +177,7 @@ def load_inputs(results_dir: str | os.PathLike) -> ReportInputs:
     folder = Path(results_dir)
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: not a folder")
-    res, timing, acc = folder / "results.csv", folder / "timing.csv", folder / "accuracy_vs_time.csv"
+    res, timing, acc = results_file(folder), folder / "timing.csv", folder / "accuracy_vs_time.csv"
     if not res.exists() and not timing.exists():
         raise FileNotFoundError(f"{folder}: neither results.csv nor timing.csv is there; nothing to report")
     inputs = ReportInputs(folder=folder, config=_read_json(folder / "config.json"),

@@ -33,7 +33,9 @@ REPORTS = (
 
 
 def _means(folder: Path) -> pd.DataFrame | None:
-    path = folder / "results.csv"
+    from bench.reporting import results_file
+
+    path = results_file(folder)
     if not path.is_file():
         return None
     frame = pd.read_csv(path)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from bench.reporting import results_file
 from bench.results import read_csv
 from bench.tables import axis_label, axis_means, crossed_axes, swept_axes
 
@@ -114,7 +115,7 @@ def main(folders: list[str]) -> int:
            "seeds of the ok cells). Margin: `neuspike-net` minus the best other method (its spike-only variant "
            "excluded); bold where `neuspike-net` is best.\n"]
     for folder in folders:
-        whole = read_csv(Path(folder) / "results.csv")
+        whole = read_csv(results_file(folder))
         for heading, frame, axis in _sections(whole, folder):
             out.append(f"\n## {heading}\n\n")
             out.append(_point_table(frame, axis))

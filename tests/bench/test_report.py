@@ -462,3 +462,18 @@ def test_the_methods_table_summarises_each_methods_notes_in_one_short_cell():
     summary = tb.method_summary(rows_frame(rows))
     assert summary.loc[0, "normalisation"] == "clamp; short history: warmed up on # of # windows (2 of 4 cells)"
     assert tb.summarise_notes(pd.Series(["robust-p99", "robust-p99"])) == "robust-p99"
+
+
+def test_a_committed_report_may_keep_its_results_gzipped(tmp_path):
+    """``results.csv.gz`` alone is read as ``results.csv``; the tables are the same byte for byte."""
+    import gzip
+
+    plain = write_results(tmp_path / "plain", synthetic_results())
+    packed = tmp_path / "packed"
+    packed.mkdir()
+    (packed / "results.csv.gz").write_bytes(gzip.compress((plain / "results.csv").read_bytes()))
+    assert reporting.results_file(packed) == packed / "results.csv.gz"
+    assert reporting.results_file(plain) == plain / "results.csv"
+    reporting.build_report(plain)
+    reporting.build_report(packed)
+    assert table_bytes(plain) == table_bytes(packed)
