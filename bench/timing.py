@@ -71,10 +71,12 @@ def _sizes_text(sizes: Iterable[tuple[int, int]]) -> str:
 
 def newest_results(candidates: Sequence[str | os.PathLike] = DEFAULT_RESULTS) -> Path | None:
     """The candidate folder whose ``results.csv`` was written last, or ``None``."""
-    paths = [Path(c) for c in candidates if (Path(c) / "results.csv").is_file()]
+    from bench.reporting import results_file
+
+    paths = [Path(c) for c in candidates if results_file(c).is_file()]
     if not paths:
         return None
-    return max(paths, key=lambda p: (p / "results.csv").stat().st_mtime_ns)
+    return max(paths, key=lambda p: results_file(p).stat().st_mtime_ns)
 
 
 def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
@@ -175,11 +177,11 @@ def run(args: argparse.Namespace) -> Path:
     results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
     results = None
     if results_dir is not None:
-        from bench.reporting import read_results
+        from bench.reporting import read_results, results_file
 
-        if not (results_dir / "results.csv").is_file():
-            raise InputError(f"--results: {results_dir} holds no results.csv")
-        results = read_results(results_dir / "results.csv")
+        if not results_file(results_dir).is_file():
+            raise InputError(f"--results: {results_dir} holds no results.csv (or results.csv.gz)")
+        results = read_results(results_file(results_dir))
         sweep_size = sweep_resolution(results)
         if sweep_size is not None and sweep_size not in sizes:
             # time the methods at the sweep's own resolution too, so the chart pairs like with like
