@@ -64,7 +64,7 @@ import torch
 import torch.nn.functional as F
 
 from neuspike.utils import atomic
-from neuspike.conditions import Condition
+from neuspike.conditions import Condition, Effect, effect
 from neuspike.errors import InputError
 from neuspike.methods.representations import normalize_voxel_grid
 from neuspike.utils.rng import derive_rng
@@ -124,11 +124,47 @@ def draw_cell(data: SequenceData, rng: np.random.Generator) -> Cell:
         scene = SceneSpec("fan", rpm=float(rng.uniform(500, 2600) * rng.choice([-1.0, 1.0])),
                           blades=int(rng.integers(2, 6)), blade_width_deg=float(rng.uniform(15, 40)),
                           blade_contrast=float(np.exp(rng.uniform(np.log(0.1), np.log(3.0)))), **common)
-    condition = Condition(light=float(rng.choice(LIGHTS)), motion=int(rng.choice(MOTIONS)),
-                          noise=str(rng.choice(data.noise_levels)))
+    light, motion = float(rng.choice(LIGHTS)), int(rng.choice(MOTIONS))
+    noise = str(rng.choice(data.noise_levels))
     lo, hi = data.threshold_range
     sensor = SensorConfig(event_threshold=float(np.exp(rng.uniform(np.log(lo), np.log(hi)))))
-    return Cell(scene, condition, sensor, int(rng.integers(0, 2**31 - 1)))
+    seed = int(rng.integers(0, 2**31 - 1))
+    # drawn after every earlier draw, and only when asked for: a nominal spec's items are unchanged
+    effects = SENSOR_DRAWS[data.sensor](rng, noise)
+    return Cell(scene, Condition(light=light, motion=motion, noise=noise, effects=effects), sensor, seed)
+
+
+def nominal_sensor(rng: np.random.Generator, noise: str) -> tuple[Effect, ...]:
+    """The event camera as the noise level declares it: no further stage, no draw."""
+    return ()
+
+
+def randomised_sensor(rng: np.random.Generator, noise: str) -> tuple[Effect, ...]:
+    """An event camera drawn per sequence, as real DAVIS pixels differ (REFERENCE.md §3.2, after
+    Stoffregen et al. 2020; the threshold itself comes from ``threshold_range``).
+
+    Always a frozen per-pixel threshold mismatch, sigma uniform in [0.01, 0.1] (v2e's presets: 0.02
+    clean, 0.05 noisy); each with probability 1/2, log-uniform: a refractory period of 0.1-1 ms (v2e's
+    default 0.5 ms), a leak of 0.01-1 Hz, a photoreceptor bandwidth of 10-300 Hz (v2e's noisy preset
+    30 Hz) and, where the noise level declares none, shot noise of 0.1-10 Hz.
+    """
+    def log_uniform(a: float, b: float) -> float:
+        return float(np.exp(rng.uniform(np.log(a), np.log(b))))
+
+    drawn = [effect("threshold_mismatch", sigma=float(rng.uniform(0.01, 0.1)))]
+    for name, key, lo, hi in (("refractory", "period_s", 1e-4, 1e-3), ("leak", "rate_hz", 0.01, 1.0),
+                              ("bandwidth", "cutoff_hz", 10.0, 300.0), ("shot_noise", "rate_hz", 0.1, 10.0)):
+        take, value = rng.random() < 0.5, log_uniform(lo, hi)  # both drawn always: the draws stay aligned
+        if take and not (name == "shot_noise" and noise != "none"):
+            drawn.append(effect(name, **{key: value}))
+    return tuple(drawn)
+
+
+#: How a sequence's event camera is drawn (``SequenceData.sensor``): name -> ``draw(rng, noise level)``
+#: returning the declared event stages. A new way to draw sensors is one entry here.
+SENSOR_DRAWS: dict[str, Callable[[np.random.Generator, str], tuple[Effect, ...]]] = {
+    "nominal": nominal_sensor, "randomised": randomised_sensor,
+}
 
 
 @dataclass(frozen=True)

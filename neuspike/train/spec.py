@@ -445,13 +445,17 @@ class SequenceData:
     :mod:`neuspike.train.sequences`), plus ``empty`` times the spatial spread of the image that one
     window without events gives from a zero state (0: off). ``partial_first``: share of the training runs
     whose first window is cut short (:func:`neuspike.train.sequences.partial_window`; 0: none).
+    ``sensor``: how each sequence's event camera is drawn beyond its threshold, a key of
+    :data:`neuspike.train.sequences.SENSOR_DRAWS` (``"nominal"``: the noise level's stages only, as
+    every spec before the field; ``"randomised"``: per-pixel mismatch, refractory period, leak, shot
+    noise and bandwidth drawn per sequence, as real DAVIS pixels differ).
     """
 
     kind: ClassVar[str] = "sequences"
     #: Fields that say what an item is (the shard key); the others say how many and how they are scored.
     KEY_FIELDS: ClassVar[tuple[str, ...]] = ("size", "windows", "events_per_pixel", "threshold_range", "noise_levels",
                                              "kinds", "photos", "displacement_px", "view", "hdr_fraction",
-                                             "view_fraction")
+                                             "view_fraction", "sensor")
 
     size: int = 128
     windows: int = 8
@@ -477,11 +481,14 @@ class SequenceData:
     history: float = 0.0
     empty: float = 0.0
     partial_first: float = 0.0
+    sensor: str = "nominal"
 
     def __post_init__(self) -> None:
         put = object.__setattr__
         put(self, "photos", _check_photos(self.photos))
         put(self, "noise_levels", _check_levels(self.noise_levels))
+        if self.sensor not in SENSOR_DRAW_NAMES:
+            raise InputError(f"sensor: expected one of {', '.join(SENSOR_DRAW_NAMES)}, got {self.sensor!r}")
         kinds = tuple(self.kinds)
         if not kinds or not set(kinds) <= set(SEQUENCE_KINDS):
             raise InputError(f"kinds: expected a non-empty subset of {SEQUENCE_KINDS}, got {kinds}")
@@ -541,9 +548,14 @@ class SequenceData:
             del d["hdr_fraction"]
         if d["view_fraction"] == 1.0:
             del d["view_fraction"]
+        if d["sensor"] == "nominal":  # likewise: every shard before the field keeps its key
+            del d["sensor"]
         text = json.dumps(d, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
+
+#: The names of :data:`neuspike.train.sequences.SENSOR_DRAWS` (kept here so a spec validates without torch).
+SENSOR_DRAW_NAMES = ("nominal", "randomised")
 
 DataSection = Union[WindowData, SequenceData]
 DATA_KINDS: dict[str, type] = {"windows": WindowData, "sequences": SequenceData}

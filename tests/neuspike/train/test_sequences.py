@@ -576,3 +576,30 @@ def test_broad_leaves_items_are_dead_leaves_with_a_drawn_smallest_leaf():
     assert len({s.leaf_min_radius for s in broad}) == 20
     classic = draw_cell(DataSpec(size=32, kinds=("dead_leaves",)), rng).scene
     assert classic.kind == "dead_leaves" and classic.leaf_min_radius is None
+
+
+def test_a_randomised_sensor_draws_the_event_camera_per_sequence_and_leaves_nominal_specs_alone():
+    """``sensor="randomised"``: a threshold mismatch always, the other DAVIS stages half the time each,
+    in their ranges, the same for the same seed; ``"nominal"`` declares nothing and keeps every draw
+    and the shard key of the specs before the field."""
+    nominal, randomised = DataSpec(size=32), DataSpec(size=32, sensor="randomised", threshold_range=(0.2, 1.5))
+    assert nominal.key() == DataSpec(size=32, sensor="nominal").key() != randomised.key()
+    assert DataSpec().key() == "f40df6737f28"
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    plain = [draw_cell(nominal, a) for _ in range(50)]
+    assert all(c.condition.effects == () for c in plain)
+    cells = [draw_cell(randomised, b) for _ in range(400)]
+    again = [draw_cell(randomised, np.random.default_rng(5)) for _ in range(1)]
+    assert again[0] == cells[0]
+    names = [{e.name: dict(e.params) for e in c.condition.effects} for c in cells]
+    assert all(0.01 <= n["threshold_mismatch"]["sigma"] <= 0.1 for n in names)
+    for name, key, lo, hi in (("refractory", "period_s", 1e-4, 1e-3), ("leak", "rate_hz", 0.01, 1.0),
+                              ("bandwidth", "cutoff_hz", 10.0, 300.0)):
+        present = [n[name][key] for n in names if name in n]
+        assert 0.35 < len(present) / len(names) < 0.65 and all(lo <= v <= hi for v in present), name
+    # shot noise only where the noise level declares none (a level's own shot noise is not replaced)
+    assert all("shot_noise" not in n or c.condition.noise == "none" for n, c in zip(names, cells))
+    thresholds = [c.sensor.event_threshold for c in cells]
+    assert min(thresholds) >= 0.2 and max(thresholds) <= 1.5 and max(thresholds) > 1.0
+    with pytest.raises(InputError, match="sensor"):
+        DataSpec(sensor="wild")
