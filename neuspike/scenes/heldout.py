@@ -19,7 +19,9 @@ photographs.
                to small behind: dense occlusion at every scale. Procedural, as dead leaves are, but
                shaped and veined.
 
-The procedural ones are drawn from fixed seeds: the same picture on every machine. Each loader
+The procedural ones are drawn from fixed seeds: the same picture on every machine. matplotlib (a
+dependency of the suite's reports) supplies the two real ones and the fonts; it is imported only when
+one of these pictures is loaded. Each loader
 returns luma in [0, 1] at its own size (at least 600x400, so the sweeps' 400x250 view is cropped
 from it, never enlarged).
 """
@@ -70,10 +72,7 @@ _WORDS = ("spike", "event", "camera", "integrate", "fire", "plane", "threshold",
 
 def typeset() -> np.ndarray:
     """Lines of words in several sizes, dark on light paper, rendered with matplotlib's Agg."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # no pyplot: the process's backend is left alone
     from matplotlib.figure import Figure
 
     rng = np.random.default_rng(20261206)
