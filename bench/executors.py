@@ -22,6 +22,8 @@ down (the sweep records the executor, the worker count and the threads in ``meta
 
 from __future__ import annotations
 
+import re
+
 import multiprocessing
 import os
 import threading
@@ -128,7 +130,7 @@ class DaskExecutor:
         if self.scheduler:
             try:
                 self._client = distributed.Client(self.scheduler, timeout="30s")
-            except OSError as exc:
+            except (OSError, ValueError) as exc:  # unreachable, or an address distributed cannot parse
                 raise InputError(f"cannot reach the Dask scheduler at {self.scheduler!r}: {exc}") from exc
         else:
             self._cluster = distributed.LocalCluster(
@@ -165,6 +167,17 @@ class DaskExecutor:
                 future.cancel()
 
 
+_ADDRESS = re.compile(r"^(?:[a-z][a-z0-9+.-]*://)?(?:\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):\d{1,5}$")
+
+
+def check_scheduler_address(address: str) -> str:
+    """``address`` when it reads as a Dask scheduler address (``[scheme://]host:port``); an
+    :class:`InputError` naming the expected form otherwise, before anything starts."""
+    if not isinstance(address, str) or not _ADDRESS.match(address.strip()):
+        raise InputError(f"--scheduler: expected an address such as tcp://10.0.0.5:8786 (host and port), got {address!r}")
+    return address.strip()
+
+
 def make_executor(name: str, *, workers: int = 1, scheduler: str | None = None):
     """The executor called ``name`` (``"local"`` or ``"dask"``)."""
     if name == "local":
@@ -172,5 +185,7 @@ def make_executor(name: str, *, workers: int = 1, scheduler: str | None = None):
             raise InputError("--scheduler applies to --executor dask only")
         return LocalExecutor(workers)
     if name == "dask":
+        if scheduler is not None:
+            check_scheduler_address(scheduler)
         return DaskExecutor(scheduler, workers)
     raise InputError(f"executor must be one of {', '.join(EXECUTORS)}, got {name!r}")

@@ -160,6 +160,10 @@ def execution_from_args(args: argparse.Namespace) -> Execution:
     from bench.harness import Execution
 
     cache = args.cache
+    if args.scheduler is not None:  # refused before anything is announced or created
+        from bench.executors import check_scheduler_address
+
+        check_scheduler_address(args.scheduler)
     return Execution(
         executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads, device=args.device,
         cache_dir=None if cache in (None, "none") else cache, use_cache=(cache != "none"),

@@ -1,4 +1,4 @@
-"""Executors: worker processes do not outlive the sweep that started them."""
+"""Executors: worker processes do not outlive the sweep that started them; a bad scheduler address is refused."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+
+import pytest
 
 from bench.executors import PARENT_CHECK_S
 
@@ -67,3 +69,20 @@ def test_workers_exit_when_the_main_process_is_killed(tmp_path):
                 os.kill(int(p.name.split("-")[1]), signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+def test_a_scheduler_address_that_is_not_one_is_refused_in_one_line_before_any_work(tmp_path, capsys):
+    from bench.executors import check_scheduler_address
+    from bench.sweep import main
+    from neuspike.errors import InputError
+
+    for good in ("tcp://10.0.0.5:8786", "localhost:8786", "tls://[::1]:8786"):
+        assert check_scheduler_address(good) == good
+    for bad in ("not an address", "tcp://host", "host:port", ""):
+        with pytest.raises(InputError, match="--scheduler"):
+            check_scheduler_address(bad)
+    out = tmp_path / "run"
+    assert main(["--executor", "dask", "--scheduler", "not an address", "--methods", "tfp", "--lights", "1/4",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --scheduler") and not out.exists()
