@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 
 from neuspike.utils.atomic import write_bytes, write_json, write_text
-from neuspike.errors import InputError
+from neuspike.errors import InputError, NeuSpikeError
 from neuspike.utils.jsonio import portable_path
 
 __all__ = ["merge_sweeps", "main"]
@@ -65,7 +65,14 @@ def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
         raise InputError(f"{folder}/config.json: no 'sweep' section (not written by bench.sweep or bench.noise)")
     from bench.results import read_csv
 
-    return config, metadata, read_csv(paths["results.csv"])
+    frame = read_csv(paths["results.csv"])
+    key = [*CELL_KEY, "method", "metric"]
+    repeated = frame.duplicated(key, keep=False)
+    if repeated.any():
+        first = frame.loc[repeated, key].iloc[0].to_dict()
+        raise InputError(f"{paths['results.csv']}: {int(repeated.sum())} rows repeat a (cell, method, metric), e.g. "
+                         f"{first}; a sweep writes each once")
+    return config, metadata, frame
 
 
 def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
@@ -205,9 +212,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        if Path(args.out).exists() and not Path(args.out).is_dir():
+            raise InputError(f"OUT {args.out}: exists and is not a folder")
         take = None if args.take is None else [m for m in args.take.split(",") if m]
         merged = merge_sweeps(args.out, args.folders, replace=args.replace, take=take)
-    except InputError as exc:
+    except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"merged {merged['method'].nunique()} methods over "

@@ -62,6 +62,7 @@ import numpy as np
 import pandas as pd
 
 from neuspike.utils.atomic import write_text
+from neuspike.errors import FormatError, one_line
 
 COLUMNS: tuple[str, ...] = (
     "cell", "scene", "kind", "image", "width", "height", "planes",
@@ -122,15 +123,25 @@ def to_csv_text(frame: pd.DataFrame) -> str:
 
 def read_csv(path: str | os.PathLike) -> pd.DataFrame:
     """Read a part file or ``results.csv`` back with the documented dtypes."""
-    frame = pd.read_csv(path, dtype={c: str for c in _TEXT}, keep_default_na=False,
-                        na_values={c: [""] for c in _DTYPES if _DTYPES[c] is not str})
+    try:
+        frame = pd.read_csv(path, dtype={c: str for c in _TEXT}, keep_default_na=False,
+                            na_values={c: [""] for c in _DTYPES if _DTYPES[c] is not str})
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, EOFError, OSError) as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise
+        first = next((line for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        raise FormatError(f"{path}: not a results table ({first})") from None
     for column in OPTIONAL_COLUMNS:  # results written before the column existed
         if column not in frame.columns:
             frame[column] = "" if _DTYPES[column] is str else np.nan
-    missing = set(COLUMNS) - set(frame.columns)
+    missing = sorted(set(COLUMNS) - set(frame.columns))
     if missing:
-        raise ValueError(f"{path}: missing result columns {sorted(missing)}")
-    return _typed(frame[list(COLUMNS)].copy())
+        shown = ", ".join(missing[:4]) + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
+        raise FormatError(f"{path}: not a results table (missing the columns {shown})")
+    try:
+        return _typed(frame[list(COLUMNS)].copy())
+    except (ValueError, TypeError) as exc:  # a column that does not hold its type
+        raise FormatError(f"{path}: a column does not hold its documented type ({one_line(exc)})") from None
 
 
 def method_descriptions(frame: pd.DataFrame) -> dict[str, dict[str, Any]]:

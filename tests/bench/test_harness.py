@@ -546,3 +546,27 @@ def test_progress_on_a_log_file_is_a_plain_line_now_and_then():
     eager = ProgressLines("noise", 4, 0, every_s=0.0, stream=stream)
     eager.update(1, 0)
     assert stream.getvalue().splitlines()[-1].startswith("noise: 1 of 4 cells finished (0 failed), about ")
+
+
+def test_merge_refuses_damaged_or_doubled_results_and_a_file_as_out_in_one_line(plugin, tmp_path, capsys):
+    from bench.merge import main as merge_main
+
+    cache = str(tmp_path / "cache")
+    a = run_sweep(tiny_spec(["ht-mean"]), tmp_path / "a", quiet(plugin, cache_dir=cache))
+    b = run_sweep(tiny_spec(["ht-mean-x2"]), tmp_path / "b", quiet(plugin, cache_dir=cache))
+    assert a.exit_code == b.exit_code == 0
+    capsys.readouterr()  # the sweeps' own notes
+    (tmp_path / "afile").write_text("x")
+    results = tmp_path / "b" / "results.csv"
+    good = results.read_bytes()
+    cases = [("file-out", lambda: None, str(tmp_path / "afile"), "exists and is not a folder"),
+             ("garbage", lambda: results.write_bytes(b"\x00\xff garbage"), str(tmp_path / "m1"), "not a results table"),
+             ("columns", lambda: results.write_text("cell,value\n1,2\n"), str(tmp_path / "m2"), "missing the columns"),
+             ("doubled", lambda: results.write_bytes(good + good.split(b"\n", 1)[1]), str(tmp_path / "m3"),
+              "repeat a (cell, method, metric)")]
+    for name, damage, out, message in cases:
+        results.write_bytes(good)
+        damage()
+        assert merge_main([out, str(tmp_path / "a"), str(tmp_path / "b"), "--no-report"]) == 2, name
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (name, err)
