@@ -84,6 +84,8 @@ RECORDING_KEYS = ("name", "spikes", "events", "height", "width", "raw_width", "p
                   "window_planes", "instants", "ground_truth")
 INSTANT_KINDS = ("centre", "plane", "planes", "times_s", "every_planes")
 _NAME = re.compile(r"^[A-Za-z0-9._-]+$")
+#: The longest recording name: names become file names (with a suffix), which most file systems cap at 255 bytes.
+MAX_NAME_CHARS = 120
 
 
 # --------------------------------------------------------------------------- the parsed manifest
@@ -227,8 +229,10 @@ def parse_recording(entry: Any, index: int) -> Recording:
     if not isinstance(entry, dict):
         raise InputError(f"recordings[{index}]: expected an object, got {type(entry).__name__}")
     name = entry.get("name")
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise InputError(f"recordings[{index}]: name: expected letters, digits, '.', '_' or '-', got {name!r}")
+    if not isinstance(name, str) or not _NAME.match(name) or name in (".", "..") or len(name) > MAX_NAME_CHARS:
+        shown = name if not isinstance(name, str) or len(name) <= 60 else f"{name[:40]}... ({len(name)} characters)"
+        raise InputError(f"recordings[{index}]: name: expected 1 to {MAX_NAME_CHARS} letters, digits, '.', '_' or "
+                         f"'-' (not '.' or '..': a name becomes a file name), got {shown!r}")
     unknown = sorted(set(entry) - set(RECORDING_KEYS))
     if unknown:
         raise _fail(name, f"unknown keys {unknown} (known: {', '.join(RECORDING_KEYS)})")

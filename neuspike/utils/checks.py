@@ -32,7 +32,9 @@ def check_finite_nonnegative(name: str, array: np.ndarray) -> None:
 
 
 def _float(name: str, value: Any, what: str) -> float:
-    """``value`` as a float, or :class:`InputError` saying ``expected {what}``."""
+    """``value`` as a float, or :class:`InputError` saying ``expected {what}`` (``true`` is not a number)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name}: expected {what}, got {value!r}")
     try:
         return float(value)
     except (TypeError, ValueError):

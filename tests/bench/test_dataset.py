@@ -288,3 +288,20 @@ def test_a_folder_the_layout_does_not_read_is_said_not_skipped_silently(spike_gt
     said = [n for n in manifest.notes if "is not read" in n]
     assert len(said) == 2 and said[1].startswith("video/") and "neuspike.simulate --video" in said[1]
     assert said[0] == "notes/ is not read by the spike-gt layout"
+
+
+@pytest.mark.parametrize("name", [".", "..", "x" * 300, "a/b", ""])
+def test_a_recording_name_that_cannot_be_a_file_name_is_refused(name):
+    from neuspike.errors import InputError
+
+    with pytest.raises(InputError, match="name: expected 1 to 120 letters"):
+        mf.parse_recording({"name": name, "spikes": "spike/a.dat"}, 0)
+    assert mf.parse_recording({"name": "x" * 120, "spikes": "spike/a.dat"}, 0).name == "x" * 120
+
+
+@pytest.mark.parametrize("key", ["gain", "plane_rate_hz"])
+def test_true_is_not_a_number(key):
+    from neuspike.errors import InputError
+
+    with pytest.raises(InputError, match=f"{key}: expected a positive number, got True"):
+        mf.parse_recording({"name": "a", "spikes": "spike/a.dat", key: True}, 0)
