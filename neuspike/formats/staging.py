@@ -101,8 +101,11 @@ def _exchange(a: Path, b: Path) -> bool:
 
 
 def _is_ours(name: str, ours: frozenset[str]) -> bool:
-    """An entry the run writes, or a temporary file of one (``.<entry>.<id>.tmp``, left by a killed run)."""
-    return name in ours or (name.endswith(".tmp") and any(name.startswith(f".{n}.") for n in ours))
+    """An entry the run writes, or a temporary that some run of the suite left when it was killed,
+    whatever it was writing: ``.<entry>.<random>.tmp`` (atomic writes) and the writers' partial files
+    and folders ``.<stem>.partial<suffix>`` and ``.<entry>.partial`` (:mod:`neuspike.video.writers`).
+    A temporary is never a user's file, so it is never carried into the new folder."""
+    return name in ours or (name.startswith(".") and (".partial" in name or name.endswith(".tmp")))
 
 
 def _carry(src: Path, dst: Path, ours: frozenset[str]) -> None:

@@ -86,6 +86,20 @@ def test_a_kill_during_a_rerun_leaves_the_old_folder_whole(finished, tmp_path):
     assert main(args + ["--method", "tfp,tfi"]) == 0
     assert {"tfp.mp4", "tfi.mp4", "video.json", "compare.mp4"} <= set(_snapshot(out))
     assert not list(tmp_path.glob(".out.*"))
+    # nothing the killed run was writing is carried into the new folder
+    assert not [p for p in out.rglob("*") if ".partial" in p.name or p.name.endswith(".tmp")]
+
+
+def test_a_killed_runs_partial_files_are_its_own_not_the_users():
+    """The staging's carry keeps a user's files in --out and drops any killed run's temporaries."""
+    from neuspike.formats.staging import _is_ours
+
+    ours = frozenset({"tfp", "tfp.mp4", "video.json"})
+    for name in (".tfp.partial.mp4", ".tfp.partial", ".video.json.1a2b.tmp", "tfp.mp4",
+                 ".other.partial.mp4", ".other.mp4.x9y8.tmp"):  # a killed run's, whatever it wrote
+        assert _is_ours(name, ours), name
+    for name in ("notes.txt", ".hidden", "other.mp4", "partial_results.csv"):
+        assert not _is_ours(name, ours), name
 
 
 def test_a_file_size_limit_fails_in_one_line_and_keeps_the_old_folder(finished, tmp_path):
