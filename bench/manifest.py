@@ -146,15 +146,18 @@ class Resolved:
     span_s: tuple[float, float] | None = None
     damaged: str | None = None
     file_bytes: dict[str, int] = field(default_factory=dict)
+    file_sha256: dict[str, str] = field(default_factory=dict)
 
     def path(self, rel: str | None) -> Path | None:
         return None if rel is None else Path(self.root) / rel
 
     def identity(self) -> dict[str, Any]:
-        """What determines this recording's rows (paths relative to the dataset, file sizes)."""
+        """What determines this recording's rows: paths relative to the dataset, and the content of
+        every file it reads (sizes and sha256), so a file replaced by another of the same size, or a
+        changed ground-truth image, is scored again on a resume."""
         return {"recording": self.recording.as_dict(), "height": self.height, "width": self.width,
                 "plane_rate_hz": self.plane_rate_hz, "gain": self.gain, "window_planes": self.window_planes,
-                "damaged": self.damaged, "file_bytes": self.file_bytes}
+                "damaged": self.damaged, "file_bytes": self.file_bytes, "file_sha256": self.file_sha256}
 
 
 def _fail(name: str, message: str) -> InputError:
@@ -544,6 +547,14 @@ def resolve(manifest: Manifest, root: str | os.PathLike) -> list[Resolved]:
     return [_resolve_one(r, base) for r in manifest.recordings]
 
 
+def _sha256(path: Path) -> str:
+    """The sha256 of a file's bytes (read in blocks: a recording may be large)."""
+    import hashlib
+
+    with open(path, "rb") as f:
+        return hashlib.file_digest(f, "sha256").hexdigest()
+
+
 def _resolve_one(rec: Recording, base: Path) -> Resolved:
     from neuspike.errors import FormatError
     from neuspike.formats.recording import open_recording
@@ -559,6 +570,7 @@ def _resolve_one(rec: Recording, base: Path) -> Resolved:
     for g in gts:
         if g is not None and not (base / g).is_file():
             raise _fail(rec.name, f"ground truth {g} does not exist (in {base})")
+    digests = {rel: _sha256(base / rel) for rel in [*files, *(g for g in gts if g is not None)]}
     try:
         reader = open_recording(spikes=base / rec.spikes if rec.spikes else None,
                                 events=base / rec.events if rec.events else None, height=rec.height,
@@ -567,23 +579,25 @@ def _resolve_one(rec: Recording, base: Path) -> Resolved:
     except InputError as exc:  # a size or option that disagrees with the files
         raise _fail(rec.name, str(exc)) from None
     except (FormatError, SourceError, OSError, ValueError, KeyError) as exc:
-        return _damaged(rec, base, files, one_line(exc))
+        return _damaged(rec, base, files, one_line(exc), digests=digests)
     with reader:
         try:
             span = reader.span_s()
         except (FormatError, InputError, OSError, ValueError) as exc:
-            return _damaged(rec, base, files, one_line(exc), reader)
+            return _damaged(rec, base, files, one_line(exc), reader, digests=digests)
         window = rec.window_planes if rec.window_planes is not None else reader.default_window_planes()
         instants = _instants_of(rec, reader, span, window)
         h, w = reader.height, reader.width
         resolved = Resolved(recording=rec, root=str(base), height=h, width=w, plane_rate_hz=reader.plane_rate_hz,
                             gain=reader.gain, gain_source=reader.gain_source, window_planes=window,
-                            instants=instants, num_planes=reader.num_planes, span_s=span, file_bytes=files)
+                            instants=instants, num_planes=reader.num_planes, span_s=span, file_bytes=files,
+                            file_sha256=digests)
     _check_ground_truth(rec, base, instants, h, w)
     return resolved
 
 
-def _damaged(rec: Recording, base: Path, files: dict[str, int], reason: str, reader: Any = None) -> Resolved:
+def _damaged(rec: Recording, base: Path, files: dict[str, int], reason: str, reader: Any = None, *,
+             digests: dict[str, str]) -> Resolved:
     """A recording whose files cannot be read: the instants the manifest names (one when they depend on the file)."""
     inst = rec.instants
     gts = rec.ground_truth if isinstance(rec.ground_truth, list) else [rec.ground_truth]
@@ -597,7 +611,8 @@ def _damaged(rec: Recording, base: Path, files: dict[str, int], reason: str, rea
         instants = (Instant(0, math.nan, None, None, gts[0]),)
     return Resolved(recording=rec, root=str(base), height=rec.height, width=rec.width,
                     plane_rate_hz=rec.plane_rate_hz, gain=rec.gain, gain_source="given" if rec.gain else "unknown",
-                    window_planes=rec.window_planes, instants=instants, damaged=reason, file_bytes=files)
+                    window_planes=rec.window_planes, instants=instants, damaged=reason, file_bytes=files,
+                    file_sha256=digests)
 
 
 def _instants_of(rec: Recording, reader: Any, span: tuple[float, float], window: int) -> tuple[Instant, ...]:

@@ -305,3 +305,25 @@ def test_true_is_not_a_number(key):
 
     with pytest.raises(InputError, match=f"{key}: expected a positive number, got True"):
         mf.parse_recording({"name": "a", "spikes": "spike/a.dat", key: True}, 0)
+
+
+def test_a_recording_replaced_by_one_of_the_same_size_is_scored_again(spike_gt, tmp_path, capsys):
+    """Identity by content: a resume recomputes a recording whose file changed but kept its byte size,
+    and keeps the rows of one that did not change."""
+    root = tmp_path / "ds"
+    shutil.copytree(spike_gt, root)
+    out = tmp_path / "run"
+    args = [str(root), "--methods", "tfp", "--out", str(out)]
+    code, _, err = _run(args, capsys)
+    assert code == 0, err
+    before = read_csv(out / "results.csv")
+    dat = root / "spike" / "still.dat"
+    data = bytearray(dat.read_bytes())
+    data[: len(data) // 2] = bytes(b ^ 0xFF for b in data[: len(data) // 2])  # other spikes, the same size
+    dat.write_bytes(bytes(data))
+    code, printed, err = _run(args, capsys)
+    assert code == 0, err
+    assert "1 computed now" in printed  # the still recording's one instant; the pan's rows resumed
+    after = read_csv(out / "results.csv")
+    psnr = lambda f, name: f[(f["scene"] == name) & (f["metric"] == "psnr")]["value"].iloc[0]  # noqa: E731
+    assert psnr(after, "pan") == psnr(before, "pan") and psnr(after, "still") != psnr(before, "still")
