@@ -615,6 +615,18 @@ def _damaged(rec: Recording, base: Path, files: dict[str, int], reason: str, rea
                     file_sha256=digests)
 
 
+#: The most instants one recording may ask for (each is a reconstruction by every method): beyond it the
+#: manifest is refused before any work, with the count and a step that fits.
+MAX_INSTANTS = 20_000
+
+
+def _check_instant_count(name: str, count: int, step: int) -> None:
+    if count > MAX_INSTANTS:
+        fits = math.ceil(step * count / MAX_INSTANTS)
+        raise _fail(name, f"instants.every_planes {step} asks for {count:,} instants (each reconstructed by every "
+                          f"method); at most {MAX_INSTANTS:,} are run: take every_planes >= {fits:,}")
+
+
 def _instants_of(rec: Recording, reader: Any, span: tuple[float, float], window: int) -> tuple[Instant, ...]:
     inst = rec.instants
     gts = rec.ground_truth if isinstance(rec.ground_truth, list) else None
@@ -661,9 +673,11 @@ def _instants_of(rec: Recording, reader: Any, span: tuple[float, float], window:
         last = max(total - (window - window // 2), min(first, total - 1))
         if first >= total:
             raise _fail(rec.name, f"key instant: instants.first_plane {first} is outside the spike file's {total} planes")
+        _check_instant_count(rec.name, len(range(first, last + 1, step)), step)
         return tuple(at_plane(i, k, None) for i, k in enumerate(range(first, last + 1, step)))
     t0, t1 = span
     count = math.floor(((t1 - t0) * rate - 0.5 - first) / step + 1e-9) + 1
+    _check_instant_count(rec.name, count, step)
     times = [t0 + (first + i * step + 0.5) / rate for i in range(max(0, count))]
     if not times:
         raise _fail(rec.name, f"key instant: the first instant (plane {first} at {rate:g} planes/s after the first "

@@ -327,3 +327,21 @@ def test_a_recording_replaced_by_one_of_the_same_size_is_scored_again(spike_gt, 
     after = read_csv(out / "results.csv")
     psnr = lambda f, name: f[(f["scene"] == name) & (f["metric"] == "psnr")]["value"].iloc[0]  # noqa: E731
     assert psnr(after, "pan") == psnr(before, "pan") and psnr(after, "still") != psnr(before, "still")
+
+
+def test_a_manifest_that_asks_for_millions_of_instants_is_refused_before_any_work(spike_gt, tmp_path, capsys):
+    """every_planes 1 on an event recording of a long span: refused with the count and a step that fits."""
+    from neuspike.errors import InputError
+
+    manifest = {"manifest": 1, "recordings": [{"name": "long", "spikes": "spike/pan.npz", "gain": LIGHT,
+                                              "window_planes": 32, "instants": {"every_planes": 1}}]}
+    saved, mf.MAX_INSTANTS = mf.MAX_INSTANTS, 10
+    try:
+        path = tmp_path / "m.json"
+        path.write_text(json.dumps(manifest))
+        code, _, err = _run([str(spike_gt), "--manifest", str(path), "--methods", "tfp", "--out", str(tmp_path / "o")],
+                            capsys)
+    finally:
+        mf.MAX_INSTANTS = saved
+    assert code == 2 and "asks for 65 instants" in err and "take every_planes >= 7" in err
+    assert not (tmp_path / "o" / "results.csv").exists()
