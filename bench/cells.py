@@ -80,12 +80,16 @@ class WorkerSetup:
         torch intra-op threads per worker (``None`` leaves torch's default).
     device : str
         Torch device of learned methods.
+    precision : str or None
+        The precision of every learned method (``"auto"``, ``"float32"``, ``"bfloat16"``); ``None``
+        keeps each registry entry's own (``"auto"``: chosen by measurement).
     """
 
     plugins: tuple[str, ...] = ()
     weights: str | None = None
     threads: int | None = None
     device: str = "cpu"
+    precision: str | None = None
 
 
 @dataclass(frozen=True)
@@ -226,10 +230,11 @@ def instances(names: tuple[str, ...] | list[str], setup: WorkerSetup) -> dict[st
     :class:`~neuspike.errors.InputError`.
     """
     entries = {name: registry.entry(name) for name in names}
-    key = lambda name: (name, setup.weights, setup.device)  # noqa: E731
+    key = lambda name: (name, setup.weights, setup.device, setup.precision)  # noqa: E731
     todo = [n for n in names if key(n) not in _INSTANCES or _INSTANCES[key(n)][0] is not entries[n]]
     if todo:
-        made = registry.create_many(todo, weights_dir=setup.weights, device=setup.device, keep_errors=True)
+        made = registry.create_many(todo, weights_dir=setup.weights, device=setup.device,
+                                    precision=setup.precision, keep_errors=True)
         for name in todo:
             _INSTANCES[key(name)] = [entries[name], made[name], False]
     return {name: _INSTANCES[key(name)] for name in names}

@@ -176,6 +176,10 @@ class Execution:
         Torch device of learned methods (default ``"cpu"``). It and the precision each learned
         method resolves on it change the results, so both are part of the sweep's identity
         (:func:`arithmetic`); a device no selected method runs on is refused.
+    precision : str or None
+        The precision of every learned method (``"auto"``, ``"float32"`` or ``"bfloat16"``); ``None``
+        keeps each method's own (``"auto"``). Like the device, what it resolves to is part of the
+        sweep's identity.
     allow_failures, force, retry_failed, progress, report :
         See the command line's help. ``progress=None`` shows the bar only on a terminal.
     """
@@ -193,6 +197,7 @@ class Execution:
     progress: bool | None = None
     report: bool = True
     device: str = "cpu"
+    precision: str | None = None
 
 
 @dataclass
@@ -566,7 +571,8 @@ def prepare_execution(execution: Execution, weights: str | None) -> tuple[Any, i
     if not remote:  # workers on this machine, with the threads given or the default
         _check_oversubscription(executor.workers, threads)
     plugins = tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugin_names(execution.plugins))
-    setup = WorkerSetup(plugins=plugins, weights=weights, threads=threads, device=execution.device)
+    setup = WorkerSetup(plugins=plugins, weights=weights, threads=threads, device=execution.device,
+                        precision=execution.precision)
     return executor, threads, remote, setup
 
 

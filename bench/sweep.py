@@ -93,6 +93,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu; e.g. cuda); "
                    "part of the sweep's identity with the precision it resolves to, so a resume must use the same; "
                    "refused when no selected method runs on a torch device")
+    r.add_argument("--precision", choices=("auto", "float32", "bfloat16"),
+                   help="arithmetic of every learned method (default: each method's own, auto = bfloat16 only where "
+                   "a measured step is faster on this device); part of the sweep's identity, as the device is")
     r.add_argument("--cache", help="folder of cached simulated recordings (default: <out>/cache); "
                    "'none' disables the cache")
     r.add_argument("--allow-failures", action="store_true",
@@ -166,6 +169,7 @@ def execution_from_args(args: argparse.Namespace) -> Execution:
         check_scheduler_address(args.scheduler)
     return Execution(
         executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads, device=args.device,
+        precision=args.precision,
         cache_dir=None if cache in (None, "none") else cache, use_cache=(cache != "none"),
         plugins=tuple(args.plugin), allow_failures=args.allow_failures, force=args.force,
         retry_failed=args.retry_failed, progress=False if args.no_progress else None,

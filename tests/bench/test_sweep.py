@@ -34,3 +34,17 @@ def test_an_unwritable_out_is_one_line_before_any_work(tmp_path, capsys):
     # nothing is created on the way, so the first thing in the path that cannot hold a folder is named
     assert err[-1].startswith("error: --out") and f"{tmp_path / 'file'} is not a folder" in err[-1]
     assert not any("sweep:" in line for line in err)  # nothing started
+
+
+def test_sweeps_take_a_precision_for_every_learned_method(tmp_path):
+    """``--precision`` reaches every worker's method creation; an unknown one is a usage error."""
+    from bench.cells import WorkerSetup, instances
+    from bench.sweep import build_parser, execution_from_args
+
+    args = build_parser().parse_args(["--precision", "float32", "--out", str(tmp_path)])
+    assert execution_from_args(args).precision == "float32"
+    assert execution_from_args(build_parser().parse_args([])).precision is None  # each method's own
+    made = instances(("neuspike-net-spike", "tfp"), WorkerSetup(precision="float32"))
+    assert made["neuspike-net-spike"][1].method.params["precision"] == "float32"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--precision", "float16"])
