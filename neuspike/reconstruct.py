@@ -259,6 +259,8 @@ def run(spec: ReconstructSpec, stream: TextIO | None = None) -> list[MethodResul
     else:
         print("no ground truth: no-reference measures (noise_sigma: Haar-MAD noise estimate; "
               "laplacian_var: sharpness), see neuspike.metrics", file=stream)
+    print("times: one call per method, its first, so one-time compilation (numba kernels, torch.compile) "
+          "and a recurrent method's warm-up are in it; python -m bench.timing times warm frames", file=stream)
     results = []
     for method in methods:
         method.reset()
@@ -274,7 +276,7 @@ def run(spec: ReconstructSpec, stream: TextIO | None = None) -> list[MethodResul
             scores = no_reference(image)
             shown = f"noise_sigma {scores['noise_sigma']:.4f}, laplacian_var {scores['laplacian_var']:.4g}"
         print(f"{method.name}: wrote {png} and {npy}; normalisation {method.last_normalisation}; "
-              f"{seconds * 1e3:.1f} ms; {shown}", file=stream)
+              f"{seconds * 1e3:.1f} ms first call; {shown}", file=stream)
         results.append(MethodResult(method.name, image, png, npy, method.last_normalisation, seconds, scores))
     return results
 
