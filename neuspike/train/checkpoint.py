@@ -23,6 +23,7 @@ or the new one, and the temporaries a kill leaves behind are removed when the ru
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import math
@@ -36,7 +37,7 @@ from neuspike.errors import FormatError, InputError
 from neuspike.train.spec import TrainSpec, load_spec
 
 __all__ = [
-    "CHECKPOINT", "CHECKPOINT_FORMAT", "LOG", "LOG_COLUMNS", "SPEC", "append_log", "check_spec",
+    "CHECKPOINT", "CHECKPOINT_FORMAT", "LOG", "LOG_COLUMNS", "SPEC", "append_log", "check_spec", "read_checkpoint_file",
     "export_weights", "load_checkpoint", "make_card", "remove_temporaries", "save_checkpoint", "trim_log",
     "upgrade_checkpoint",
 ]
@@ -145,24 +146,51 @@ def save_checkpoint(out_dir: str | os.PathLike, *, step: int, module, optimizer,
     """Write ``checkpoint.pt`` atomically, every tensor on the CPU (with torch's global CPU RNG state)."""
     import torch
 
-    buf = io.BytesIO()
+    inner = io.BytesIO()
     torch.save({"format": CHECKPOINT_FORMAT, "step": int(step), "module": _on_cpu(module.state_dict()),
                 "optimizer": _on_cpu(optimizer.state_dict()), "best": dict(best), "wall_s": float(wall_s),
-                "torch_rng": torch.get_rng_state()}, buf)
+                "torch_rng": torch.get_rng_state()}, inner)
+    data = inner.getvalue()
+    # sealed with its sha256: a file damaged after it was written is refused on resume, not trained on
+    buf = io.BytesIO()
+    torch.save({"sealed": data, "sha256": hashlib.sha256(data).hexdigest()}, buf)
     return atomic.write_bytes(Path(out_dir) / CHECKPOINT, buf.getvalue())
+
+
+def read_checkpoint_file(path: str | os.PathLike) -> Any:
+    """The content of a ``checkpoint.pt`` as written, its seal checked (:func:`save_checkpoint`); an
+    unsealed file of an earlier trainer is returned as read.
+
+    Raises
+    ------
+    FormatError
+        An unreadable file, or one whose content no longer matches the checksum written with it.
+    """
+    import torch
+
+    path = Path(path)
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        if isinstance(state, dict) and "sealed" in state:  # written since checkpoints were sealed
+            data = state.get("sealed")
+            if not isinstance(data, bytes) or hashlib.sha256(data).hexdigest() != state.get("sha256"):
+                raise FormatError(f"{path}: damaged (its content no longer matches the checksum written with "
+                                  f"it); delete it to start the run again from its spec, or restore it")
+            state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except FormatError:
+        raise
+    except Exception as exc:
+        first = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        raise FormatError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {first})") from None
+    return state
 
 
 def load_checkpoint(out_dir: str | os.PathLike, *, score_key: str, variants: Iterable[str]) -> dict[str, Any] | None:
     """The run folder's checkpoint in the current form (:func:`upgrade_checkpoint`), or ``None``."""
-    import torch
-
     path = Path(out_dir) / CHECKPOINT
     if not path.exists():
         return None
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise FormatError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    state = read_checkpoint_file(path)
     if not isinstance(state, dict):
         raise FormatError(f"{path}: not a training checkpoint")
     try:

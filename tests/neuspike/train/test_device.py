@@ -4,6 +4,8 @@ the device computes bfloat16, and (on a machine with a GPU) a run begun on CUDA 
 
 from __future__ import annotations
 
+from neuspike.train.checkpoint import read_checkpoint_file
+
 import csv
 import dataclasses
 import json
@@ -77,8 +79,8 @@ def test_an_explicit_cpu_run_equals_the_default_run_bit_for_bit(tmp_path, make):
     assert default.device == "cpu" and dataclasses.replace(explicit, out_dir=default.out_dir) == default
     a, b = train(default, quiet=True), train(explicit, quiet=True)
     assert a["step"] == b["step"] == default.steps and a["best"] == b["best"]
-    ca = torch.load(Path(default.out_dir) / "checkpoint.pt", weights_only=True)
-    cb = torch.load(Path(explicit.out_dir) / "checkpoint.pt", weights_only=True)
+    ca = read_checkpoint_file(Path(default.out_dir) / "checkpoint.pt")
+    cb = read_checkpoint_file(Path(explicit.out_dir) / "checkpoint.pt")
     assert ca["module"].keys() == cb["module"].keys()
     for k in ca["module"]:
         assert torch.equal(ca["module"][k], cb["module"][k]), k
@@ -104,7 +106,7 @@ def test_a_run_begun_on_cuda_resumes_on_the_cpu(tmp_path):
     first = Trainer(gpu, quiet=True)
     assert first.run(until=2)["step"] == 2
     assert next(first.module.parameters()).device.type == "cuda"
-    state = torch.load(Path(gpu.out_dir) / "checkpoint.pt", weights_only=True)  # no map_location needed
+    state = read_checkpoint_file(Path(gpu.out_dir) / "checkpoint.pt")  # on the CPU, no map_location needed
     assert all(v.device.type == "cpu" for v in state["module"].values())
     assert all(v.device.type == "cpu" for s in state["optimizer"]["state"].values() for v in s.values())
     card = json.loads((Path(gpu.out_dir) / "neuspike-net.json").read_text())

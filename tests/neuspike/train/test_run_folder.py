@@ -3,6 +3,8 @@ go, the log never repeats a step, a file size limit is a one-line error, the com
 
 from __future__ import annotations
 
+from neuspike.train.checkpoint import read_checkpoint_file
+
 import csv
 import dataclasses
 import io
@@ -123,7 +125,7 @@ def _tiny_sequences(tmp_path, out: str) -> TrainSpec:
 def _old_window_folder(spec: TrainSpec) -> None:
     """Turn a run folder killed after step 2 into what the single-window trainer left."""
     out = Path(spec.out_dir)
-    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    state = read_checkpoint_file(out / "checkpoint.pt")
     old = {"step": state["step"], "model": state["module"], "optim": state["optimizer"],
            "best": {v: b["val_psnr"] for v, b in state["best"].items()}, "torch_rng": state["torch_rng"]}
     buf = io.BytesIO()
@@ -149,7 +151,7 @@ def _old_window_folder(spec: TrainSpec) -> None:
 def _old_sequence_folder(spec: TrainSpec) -> None:
     """Turn a run folder killed after step 2 into what the sequence trainer left."""
     out = Path(spec.out_dir)
-    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    state = read_checkpoint_file(out / "checkpoint.pt")
     best = state["best"].get("main", {"val_ssim": -1.0})
     old = {"module": state["module"], "optimizer": state["optimizer"], "step": state["step"], "best": best,
            "wall_s": state["wall_s"]}
@@ -196,8 +198,8 @@ def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights
         p.write_bytes(b"half-written")
     again = train(spec, quiet=True)
     assert again["resumed"] and again["step"] == straight["step"] == 4
-    a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)
-    b = torch.load(out / "checkpoint.pt", weights_only=True)
+    a = read_checkpoint_file(tmp_path / "a" / "checkpoint.pt")
+    b = read_checkpoint_file(out / "checkpoint.pt")
     assert b["format"] == ck.CHECKPOINT_FORMAT
     for k in a["module"]:
         assert torch.equal(a["module"][k], b["module"][k]), k
@@ -323,3 +325,29 @@ def test_training_never_replaces_the_shipped_weights_unless_told_to(tmp_path, ca
     path.write_text(json.dumps({**_tiny_windows(tmp_path, "run").as_dict(), "export": True}))
     assert not parse(f"neuspike-net --spec {path}").export
     assert parse(f"neuspike-net --spec {path} --export").export
+
+
+def test_a_checkpoint_damaged_after_it_was_written_is_refused_not_resumed(tmp_path):
+    """A checkpoint is sealed with the sha256 of its content: one changed byte of a tensor (which the
+    file's container does not notice) is refused on resume; an unsealed checkpoint of an earlier
+    version still loads."""
+    import io
+
+    import torch
+
+    module = torch.nn.Linear(3, 2)
+    optimizer = torch.optim.Adam(module.parameters())
+    ck.save_checkpoint(tmp_path, step=7, module=module, optimizer=optimizer, best={}, wall_s=1.0)
+    path = tmp_path / "checkpoint.pt"
+    state = ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+    assert state["step"] == 7 and torch.equal(state["module"]["weight"], module.weight.detach())
+    outer = torch.load(path, weights_only=True)
+    data = bytearray(outer["sealed"])
+    data[len(data) // 2] ^= 0x01
+    buf = io.BytesIO()
+    torch.save({"sealed": bytes(data), "sha256": outer["sha256"]}, buf)
+    path.write_bytes(buf.getvalue())
+    with pytest.raises(FormatError, match="damaged"):
+        ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+    path.write_bytes(outer["sealed"])  # the form written before checkpoints were sealed
+    assert ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])["step"] == 7

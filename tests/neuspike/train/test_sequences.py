@@ -3,6 +3,8 @@ encoding, batches and flips, determinism, the loss falling on a fixed batch, and
 
 from __future__ import annotations
 
+from neuspike.train.checkpoint import read_checkpoint_file
+
 import dataclasses
 
 import numpy as np
@@ -185,8 +187,8 @@ def test_resume_gives_the_same_weights_as_one_run(tmp_path):
     train(two_spec, quiet=True, until=2)  # killed after step 2
     two = train(two_spec, quiet=True)
     assert one["step"] == two["step"] == 4 and two["resumed"]
-    a = torch.load(tmp_path / "one" / "checkpoint.pt", weights_only=True)["module"]
-    b = torch.load(tmp_path / "two" / "checkpoint.pt", weights_only=True)["module"]
+    a = read_checkpoint_file(tmp_path / "one" / "checkpoint.pt")["module"]
+    b = read_checkpoint_file(tmp_path / "two" / "checkpoint.pt")["module"]
     for k in a:
         assert torch.equal(a[k], b[k]), k
     assert (tmp_path / "w1" / "firenet-sim.safetensors").is_file()
@@ -211,7 +213,7 @@ def test_init_from_starts_at_the_given_weights_and_sets_the_bar(tmp_path):
     later = dataclasses.replace(spec, out_dir=str(tmp_path / "b"), steps=1, val_every=5, init_from=str(weights),
                                 export_dir=str(tmp_path / "w2"))
     result = train(later, quiet=True, until=0)
-    state = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["module"]
+    state = read_checkpoint_file(tmp_path / "b" / "checkpoint.pt")["module"]
     assert set(state) == set(start)
     for k in start:
         assert torch.equal(state[k], start[k].to(state[k].dtype)), k
@@ -331,7 +333,7 @@ def test_command_line_kinds_noise_levels_and_snapshots(tmp_path):
     assert snaps == ["step-00002", "step-00004"]
     card = json.loads((tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.json").read_text())
     assert card["training"]["step"] == 4 and "val_ssim" in card["validation"]
-    last = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)["module"]
+    last = read_checkpoint_file(tmp_path / "run" / "checkpoint.pt")["module"]
     from neuspike.methods.weights import load_safetensors
 
     kept = load_safetensors(str(tmp_path / "run" / "snapshots" / "step-00004" / "firenet-sim.safetensors"))
