@@ -459,7 +459,11 @@ def _infer_spike_gt(root: Path, gain: float | None, common: dict[str, Any], heig
             notes.append(f"spike/{sp.name} has no gt/{sp.stem}.png: no-reference measures only")
         elif h is None and sp.suffix.lower() == ".dat":
             size = _gt_size(gt)
-            h, w = size if size is not None else (None, None)
+            if size is None:  # the .dat has no header: its size was to come from this image
+                raise InputError(f"dataset {root}: gt/{gt.name} is not a readable image, and spike/{sp.name} (a .dat "
+                                 f"without a header) takes its size from it: repair or remove the image, or give "
+                                 f"--height and --width")
+            h, w = size
         out.append({"name": sp.stem, "spikes": f"spike/{sp.name}", "height": h, "width": w, "gain": gain, **common,
                     "instants": _centre_plane(sp, h, w),
                     "ground_truth": f"gt/{gt.name}" if gt is not None else None})

@@ -345,3 +345,15 @@ def test_a_manifest_that_asks_for_millions_of_instants_is_refused_before_any_wor
         mf.MAX_INSTANTS = saved
     assert code == 2 and "asks for 65 instants" in err and "take every_planes >= 7" in err
     assert not (tmp_path / "o" / "results.csv").exists()
+
+
+def test_a_corrupt_ground_truth_image_is_named_as_the_cause(spike_gt, tmp_path):
+    """A .dat takes its size from its ground truth: when that image cannot be read, the error names it
+    (it had said the .dat needs a size)."""
+    from neuspike.errors import InputError
+
+    root = tmp_path / "ds"
+    shutil.copytree(spike_gt, root)
+    (root / "gt" / "still.png").write_bytes(b"not a png")
+    with pytest.raises(InputError, match=r"gt/still.png is not a readable image.*spike/still.dat"):
+        mf.infer_manifest(root)
