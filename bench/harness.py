@@ -48,7 +48,7 @@ import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import pandas as pd
 
@@ -625,7 +625,36 @@ def run_sweep(spec: SweepSpec, out_dir: str | os.PathLike, execution: Execution 
     return outcome
 
 
-def run_tasks(
+@contextlib.contextmanager
+def out_lock(out: Path) -> Iterator[None]:
+    """Hold ``out/.lock`` for a run: a second run on the same folder is refused in one line instead of
+    removing the first one's temporaries and mixing its parts. The lock is the kernel's (``flock``): it
+    goes with the process, so a killed run leaves nothing that blocks the next."""
+    try:
+        import fcntl
+    except ImportError:  # no flock here: run unlocked
+        yield
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".lock", "a+") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise InputError(f"{out}: another run is writing to this folder now; wait for it to finish, or use "
+                             f"another --out") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def run_tasks(out: Path, tasks: list[Any], run_fn: Any, **kwargs: Any) -> Any:
+    """:func:`_run_tasks` with the output folder locked (:func:`out_lock`)."""
+    with out_lock(out):
+        return _run_tasks(out, tasks, run_fn, **kwargs)
+
+
+def _run_tasks(
     out: Path, tasks: list[Any], run_fn: Any, *, config: dict[str, Any], stale: bool, executor: Any, threads: int,
     remote: bool, execution: Execution, label: str, run_info: dict[str, Any], execution_info: dict[str, Any],
     skipped: dict[str, str], t_start: float, write_images: Any = None,

@@ -570,3 +570,15 @@ def test_merge_refuses_damaged_or_doubled_results_and_a_file_as_out_in_one_line(
         assert merge_main([out, str(tmp_path / "a"), str(tmp_path / "b"), "--no-report"]) == 2, name
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], (name, err)
+
+
+def test_a_second_run_on_the_same_out_is_refused_while_the_first_writes(plugin, tmp_path):
+    """The folder is locked for the run (the kernel's flock, released when the process ends)."""
+    from bench.harness import out_lock
+
+    out = tmp_path / "run"
+    with out_lock(out):
+        with pytest.raises(InputError, match="another run is writing to this folder"):
+            run_sweep(tiny_spec(["ht-mean"]), out, quiet(plugin))
+        assert not (out / "parts").exists() and not (out / "results.csv").exists()
+    assert run_sweep(tiny_spec(["ht-mean"]), out, quiet(plugin)).exit_code == 0  # released
