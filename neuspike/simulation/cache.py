@@ -160,6 +160,8 @@ def load_recording(path: str | os.PathLike) -> Recording:
         The file is not a valid recording cache file of this format.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():  # a FIFO would block the read forever, a folder cannot be one
+        raise FormatError(f"{path}: not a regular file, so not a recording cache file")
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
@@ -170,7 +172,8 @@ def load_recording(path: str | os.PathLike) -> Recording:
         raise FormatError(f"{path}: expected cache format {CACHE_FORMAT!r}")
     try:
         return _recording_from(data, path)
-    except (KeyError, ValueError) as exc:  # includes InputError from the streams' validation
+    except (KeyError, ValueError, TypeError, AttributeError, IndexError) as exc:  # InputError from the streams'
+        # validation, and metadata of the wrong shape (a list where an object belongs)
         if isinstance(exc, FormatError):
             raise
         raise FormatError(f"{path}: invalid recording cache file ({type(exc).__name__}: {exc})") from exc
@@ -263,6 +266,10 @@ class RecordingCache:
         """The recording stored under ``key`` (holding ``modality`` when given), or None."""
         path = self.path(key)
         if path is None or not path.exists():
+            return None
+        if not path.is_file():  # a FIFO or a folder where a cache file belongs: simulated again, replaced
+            if path.is_dir():
+                raise FormatError(f"{path}: a folder where a recording cache file belongs; remove it")
             return None
         try:
             recording = load_recording(path)

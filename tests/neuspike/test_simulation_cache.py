@@ -253,3 +253,31 @@ def test_what_the_cache_cannot_serve_is_only_what_was_never_simulated(plugin, tm
         outcome = _sweep(plugin, methods, tmp_path / f"d{i}", cache)
         assert outcome.n_cache_hits == 2 and len(simulations) == 6, methods
         assert "simulated now" not in outcome.summary()
+
+
+def test_a_fifo_or_a_damaged_entry_in_the_cache_is_simulated_again_not_waited_on(tmp_path):
+    """A FIFO where a cache file belongs would block a read forever; a cache file whose metadata is a
+    list failed every rerun. Both are treated as absent (simulated again and replaced)."""
+    import os
+    import threading
+
+    from neuspike.errors import FormatError
+    from neuspike.simulation.cache import RecordingCache, load_recording
+
+    cache = RecordingCache(tmp_path)
+    fifo = cache.path("fifo")
+    os.mkfifo(fifo)
+    got: list = []
+    reader = threading.Thread(target=lambda: got.append(cache._load("fifo")), daemon=True)
+    reader.start()
+    reader.join(timeout=10)
+    assert not reader.is_alive() and got == [None]
+    with pytest.raises(FormatError, match="not a regular file"):
+        load_recording(fifo)
+    listed = cache.path("listed")
+    np.savez(listed, format=np.frombuffer(b"neuspike-recording-cache/2", np.uint8),
+             ground_truth=np.zeros((4, 4), np.float32), spike_bits=np.zeros((1, 4, 1), np.uint8),
+             spike_shape=np.array([1, 4, 4]), spike_json=np.frombuffer(b"[1, 2]", np.uint8))
+    with pytest.raises(FormatError, match="invalid recording cache file"):
+        load_recording(listed)
+    assert cache._load("listed") is None
