@@ -190,6 +190,8 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
         # before any work and before anything is announced or created; run_sweep checks the cells
         registry.check_device(execution.device, [registry.entry(name) for name in spec.methods])
         check_writable_folder(out, what="--out", create=False)
+        if execution.cache_dir is not None:  # an unusable cache would fail every cell: refused now
+            check_writable_folder(Path(execution.cache_dir), what="--cache", create=False)
         print(f"{spec.name} sweep: {len(spec.grid.cells())} cells x {len(spec.methods)} methods -> {out}",
               file=sys.stderr)
         outcome = run_sweep(spec, out, execution)

@@ -13,6 +13,7 @@ from bench.sweep import main
     (["--size", "7x5"], r"size 7x5: both sides must be at least 11 pixels"),
     (["--scenes", "pan:missing.png"], r"scene pan:missing.png: .*missing.png"),
     (["--methods", ""], r"expected a comma-separated list, got ''"),  # not "every method"
+    (["--cache", "/dev/null"], r"--cache /dev/null: exists and is not a folder"),  # not a failure in every cell
 ])
 def test_bad_requests_are_refused_before_any_cell_runs(tmp_path, capsys, args, message):
     out = tmp_path / "run"
