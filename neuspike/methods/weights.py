@@ -34,7 +34,7 @@ from torch import nn
 
 from neuspike.utils import atomic
 from neuspike.utils.cli import WEIGHTS_ENV, weights_dir_from_env  # noqa: F401  (the command line's; re-exported)
-from neuspike.errors import FormatError
+from neuspike.errors import FormatError, one_line
 from neuspike.methods import MethodUnavailable
 
 __all__ = [
@@ -237,6 +237,9 @@ def read_card(weights_path: str | os.PathLike) -> dict[str, Any] | None:
     if not card.is_file():
         return None
     try:
-        return json.loads(card.read_text())
+        data = json.loads(card.read_text())
     except (OSError, ValueError) as exc:
-        raise FormatError(f"{card}: not a readable JSON card ({exc})") from exc
+        raise FormatError(f"{card}: not a readable JSON card ({one_line(exc)})") from None
+    if not isinstance(data, dict):
+        raise FormatError(f"{card}: a weights card is a JSON object, got a {type(data).__name__}")
+    return data

@@ -43,7 +43,7 @@ from typing import Any, Iterator
 
 import torch
 
-from neuspike.errors import InputError
+from neuspike.errors import FormatError, InputError, one_line
 from neuspike.methods.learned import resolve_device, resolve_precision, synchronize
 from neuspike.train import checkpoint as ck
 from neuspike.train.method import training_method
@@ -225,7 +225,14 @@ class Trainer:
 
         path = self.out / "precision.json"
         if path.exists():  # a resumed run keeps the arithmetic it started with
-            record = json.loads(path.read_text())
+            try:
+                record = json.loads(path.read_text())
+            except (OSError, ValueError) as exc:
+                raise FormatError(f"{path}: not readable JSON ({one_line(exc)}); delete it to measure the "
+                                  f"precision again") from None
+            if not isinstance(record, dict) or record.get("choice") not in ("float32", "bfloat16"):
+                raise FormatError(f"{path}: expected an object whose 'choice' is float32 or bfloat16; delete it "
+                                  f"to measure the precision again")
         elif self.spec.precision != "auto" or self.precision == "float32":
             record = {"choice": self.precision, "requested": self.spec.precision, "measured": False}
         else:

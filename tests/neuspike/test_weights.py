@@ -94,3 +94,17 @@ def test_a_pickle_that_is_not_tensors_is_refused_in_one_line_without_torchs_unsa
         assert str(path) in text and "only tensors are loaded" in text
     with pytest.raises(FormatError, match="_NotATensor"):
         load_torch_state(objects)
+
+
+def test_a_weights_card_that_is_not_an_object_is_one_line(copied):
+    """A card that is a JSON list (or garbage) is a FormatError naming the card, not a traceback."""
+    from neuspike.errors import FormatError
+    from neuspike.methods.weights import read_card
+
+    card = copied / "firenet-sim.json"
+    card.write_text("[1, 2, 3]")
+    with pytest.raises(FormatError, match="a weights card is a JSON object, got a list"):
+        read_card(copied / "firenet-sim.safetensors")
+    card.write_text("{not json")
+    with pytest.raises(FormatError, match="not a readable JSON card"):
+        read_card(copied / "firenet-sim.safetensors")

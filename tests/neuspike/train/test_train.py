@@ -388,6 +388,13 @@ def test_auto_precision_takes_bfloat16_only_when_a_measured_step_is_faster_and_a
     assert json.loads((tmp_path / "run" / "precision.json").read_text())["ms_per_step"]["bfloat16"] == 80.0
     plain = Trainer(tiny_spec(tmp_path / "f32", precision="float32"), quiet=True).choose_precision()
     assert plain == {"choice": "float32", "requested": "float32", "measured": False}
+    # a damaged record is one line naming the file, not a traceback
+    from neuspike.errors import FormatError
+
+    for text in ("garbage{", "[1, 2]", '{"choice": "float16"}'):
+        (tmp_path / "run" / "precision.json").write_text(text)
+        with pytest.raises(FormatError, match="precision.json"):
+            Trainer(spec, quiet=True).choose_precision()
 
 
 def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
