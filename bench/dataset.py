@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder", metavar="DIR", help="the dataset folder (the manifest's paths are relative to it)")
     g = p.add_argument_group("the dataset")
     g.add_argument("--manifest", metavar="FILE", help="a manifest (JSON); default: inferred from DIR's layout")
+    g.add_argument("--allow-outside", action="store_true",
+                   help="read files the manifest names outside DIR (absolute paths, '..', links that lead out); "
+                   "refused by default")
     g.add_argument("--layout", default="auto", help="layout to infer: auto (default), spike-gt, events-frames or files")
     g.add_argument("--gain", type=float, metavar="G", help="inferred spike recordings: expected spikes per plane at "
                    "intensity 1 (default: an .npz's own, else unknown: each method normalises robustly)")
@@ -149,7 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
             raise InputError(f"{origin}: {str(weights)!r} is not a folder")
         spec = DatasetSpec(name=folder.resolve().name, root=str(folder), manifest=manifest, methods=_methods(args),
-                           weights=str(weights) if weights is not None else None)
+                           weights=str(weights) if weights is not None else None, allow_outside=args.allow_outside)
         # an unusable device refuses before anything is announced (run_dataset checks the methods it runs)
         registry.check_device(args.device, [registry.entry(name) for name in spec.methods])
         resolved = prepare(spec)

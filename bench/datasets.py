@@ -66,6 +66,8 @@ class DatasetSpec:
         Registry names requested; each recording runs those that read only inputs it has.
     weights : str or None
         Folder of published weights.
+    allow_outside : bool
+        Read files the manifest names outside ``root`` (refused by default: :func:`bench.manifest.resolve`).
     """
 
     name: str
@@ -73,6 +75,7 @@ class DatasetSpec:
     manifest: Manifest
     methods: tuple[str, ...]
     weights: str | None = None
+    allow_outside: bool = False
 
     def __post_init__(self) -> None:
         if not self.methods:
@@ -287,7 +290,7 @@ def _write_images(out: Path, task: InstantTask, images: dict[str, np.ndarray]) -
 
 def prepare(spec: DatasetSpec) -> list[Resolved]:
     """Check the manifest against the files (every refusal before any work)."""
-    return resolve(spec.manifest, spec.root)
+    return resolve(spec.manifest, spec.root, allow_outside=spec.allow_outside)
 
 
 def run_dataset(spec: DatasetSpec, out_dir: str | os.PathLike, execution: Execution = Execution(),

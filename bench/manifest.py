@@ -537,18 +537,38 @@ def _infer_files(root: Path, gain: float | None, common: dict[str, Any], height:
 
 
 # --------------------------------------------------------------------------- resolution
-def resolve(manifest: Manifest, root: str | os.PathLike) -> list[Resolved]:
+def resolve(manifest: Manifest, root: str | os.PathLike, *, allow_outside: bool = False) -> list[Resolved]:
     """Check every recording of ``manifest`` against the files under ``root`` and list its instants.
 
     Missing files, a size that disagrees with the files, a ground truth of another size, an instant
     outside the recording: each raises :class:`InputError` naming the recording, before any work.
     A file that exists but cannot be read is not refused here: the recording is marked ``damaged``
     and its rows fail with the reason, while the others run.
+
+    Every file a recording names must lie inside ``root`` once links are followed (no absolute path,
+    no ``..`` out of it, no link that leads out of it) unless ``allow_outside``: a manifest cannot
+    make the run read, and quote into its outputs, a file the user did not put in the dataset.
     """
     base = Path(root)
     if not base.is_dir():
         raise InputError(f"dataset {base}: not a folder")
+    if not allow_outside:
+        for rec in manifest.recordings:
+            _check_inside(rec, base)
     return [_resolve_one(r, base) for r in manifest.recordings]
+
+
+def _check_inside(rec: Recording, base: Path) -> None:
+    """Refuse a recording whose files lead out of the dataset folder (:func:`resolve`)."""
+    inside = base.resolve()
+    gts = rec.ground_truth if isinstance(rec.ground_truth, list) else [rec.ground_truth]
+    for key, rel in (("spikes", rec.spikes), ("events", rec.events), *(("ground_truth", g) for g in gts)):
+        if rel is None:
+            continue
+        target = (base / rel).resolve()
+        if Path(rel).is_absolute() or not target.is_relative_to(inside):
+            raise _fail(rec.name, f"{key}: {rel} leads out of the dataset folder {base}; recordings are read "
+                                  f"from inside it (--allow-outside reads them anyway)")
 
 
 def _sha256(path: Path) -> str:

@@ -281,7 +281,8 @@ def _read_txt_open(path: Path, width: Any, height: Any) -> EventStream:
             declared = (check_side(path, header[0], "the header's width"), check_side(path, header[1], "the header's height"))
         if declared is None:
             raise FormatError(
-                f"{path}: the first line must be 'width height' (E2VID text format), got {line[:80]!r}"
+                f"{path}: the first line must be 'width height' (E2VID text format), got a line of "
+                f"{len(line.rstrip())} characters that is not two whole numbers"
             )
         w, h = _size(path, declared, width, height, "")
         try:

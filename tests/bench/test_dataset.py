@@ -357,3 +357,28 @@ def test_a_corrupt_ground_truth_image_is_named_as_the_cause(spike_gt, tmp_path):
     (root / "gt" / "still.png").write_bytes(b"not a png")
     with pytest.raises(InputError, match=r"gt/still.png is not a readable image.*spike/still.dat"):
         mf.infer_manifest(root)
+
+
+@pytest.mark.parametrize("where", ["absolute", "dotdot", "link"])
+def test_a_manifest_cannot_read_files_outside_its_dataset_unless_told(spike_gt, tmp_path, capsys, where):
+    """An 'event file' such as /proc/self/environ, a path with '..' or a link out of the folder is
+    refused before any work, and nothing of the file reaches the outputs; --allow-outside reads it."""
+    root = tmp_path / "ds"
+    shutil.copytree(spike_gt, root)
+    secret = tmp_path / "secret.txt"
+    secret.write_text("TOKEN=do-not-quote-me\n")
+    rel = {"absolute": str(secret), "dotdot": "../secret.txt", "link": "events.txt"}[where]
+    if where == "link":
+        (root / "events.txt").symlink_to(secret)
+    manifest = {"manifest": 1, "recordings": [{"name": "x", "events": rel}]}
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(manifest))
+    out = tmp_path / "o"
+    code, printed, err = _run([str(root), "--manifest", str(path), "--methods", "events-integrate", "--out", str(out)],
+                              capsys)
+    assert code == 2 and "leads out of the dataset folder" in err and "--allow-outside" in err
+    assert not (out / "results.csv").exists()
+    code, printed, err = _run([str(root), "--manifest", str(path), "--methods", "events-integrate", "--out", str(out),
+                               "--allow-outside", "--allow-failures"], capsys)
+    written = "".join(p.read_text(errors="replace") for p in out.rglob("*") if p.is_file() and p.suffix in (".csv", ".md", ".json", ".txt"))
+    assert "do-not-quote-me" not in written + printed + err  # read as asked, but never quoted
