@@ -401,6 +401,18 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
     return pdf
 
 
+def _axis_table_pages(f: pd.DataFrame, axis: str, metric: str, title: str) -> list[Any]:
+    """The PDF pages of one metric's means against ``axis`` (none without ok rows)."""
+    wide = tb.axis_means(f, axis, metric)
+    if wide.empty:
+        return []
+    values = tb.axis_values(f, axis)
+    return figs.table_figures(
+        [f"method \\ {axis}", *[tb.axis_label(axis, v) for v in values]],
+        [[m, *[tb.fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric) for v in values]] for m in wide.index],
+        title, note=f"Mean over scenes and seeds of the ok cells, {tb.held_conditions(f, axis) or 'one condition'}.")
+
+
 def _report_results(inputs: ReportInputs, f: pd.DataFrame, fig_dir: Path, tab_dir: Path, written: list[Path],
                     figure_pages: list[Any], table_pages: list[Any], claim_pages: list[Any], spread: str) -> None:
     """The sweep part of the report: claims, axis figures and tables, the grid, Table 3, failures."""
@@ -428,15 +440,7 @@ def _report_results(inputs: ReportInputs, f: pd.DataFrame, fig_dir: Path, tab_di
         _write_table(tab_dir, axis, tb.axis_markdown(f, axis), tb.axis_csv(f, axis), written)
         values = tb.axis_values(f, axis)
         for metric in ("psnr", "ssim"):
-            wide = tb.axis_means(f, axis, metric)
-            if wide.empty:
-                continue
-            table_pages += figs.table_figures(
-                [f"method \\ {axis}", *[tb.axis_label(axis, v) for v in values]],
-                [[m, *[tb.fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric) for v in values]]
-                 for m in wide.index],
-                f"{tb.METRIC_LABELS[metric]} against the {tb.AXIS_TITLES[axis]}",
-                note=f"Mean over scenes and seeds of the ok cells, {tb.held_conditions(f, axis) or 'one condition'}.")
+            table_pages += _axis_table_pages(f, axis, metric, f"{tb.METRIC_LABELS[metric]} against the {tb.AXIS_TITLES[axis]}")
         images_dir = inputs.folder / "images"
         if images_dir.is_dir():
             kinds_in_pdf: set[str] = set()
@@ -457,23 +461,14 @@ def _report_results(inputs: ReportInputs, f: pd.DataFrame, fig_dir: Path, tab_di
     if crossed is not None:  # the light x noise grid: the light axis at each noise level
         axis, by = crossed
         _write_table(tab_dir, f"{axis}_by_{by}", tb.crossed_markdown(f, axis, by), tb.crossed_csv(f, axis, by), written)
-        values = tb.axis_values(f, axis)
         for level in tb.axis_values(f, by):
             part = f[f[by] == level]
             fig = figs.axis_figure(part, axis, ("psnr", "ssim"), spread=spread)
             written.append(figs.save_png(fig, fig_dir / f"{axis}_psnr_ssim_{safe_name(f'{by}={level}')}.png"))
             figure_pages.append(fig)
             for metric in ("psnr", "ssim", "specks"):
-                wide = tb.axis_means(part, axis, metric)
-                if wide.empty:
-                    continue
-                table_pages += figs.table_figures(
-                    [f"method \\ {axis}", *[tb.axis_label(axis, v) for v in values]],
-                    [[m, *[tb.fmt(wide.loc[m, v] if v in wide.columns else math.nan, metric) for v in values]]
-                     for m in wide.index],
-                    f"{tb.METRIC_LABELS[metric]} against the {tb.AXIS_TITLES[axis]}, "
-                    f"{tb.AXIS_TITLES[by]} {tb.axis_label(by, level)}",
-                    note=f"Mean over scenes and seeds of the ok cells, {tb.held_conditions(part, axis) or 'one condition'}.")
+                table_pages += _axis_table_pages(part, axis, metric, f"{tb.METRIC_LABELS[metric]} against the "
+                                                 f"{tb.AXIS_TITLES[axis]}, {tb.AXIS_TITLES[by]} {tb.axis_label(by, level)}")
 
     if "noise" in f and any(lv in set(f["noise"].astype(str)) for lv in tb.PAPER_TABLE3):
         ours = tb.noise_table(f)
