@@ -29,7 +29,7 @@ from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESEN
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 from neuspike.methods.counting import initial_state, level_shift
-from neuspike.methods.normalisation import dark_level
+from neuspike.methods.normalisation import DARK_ESTIMATED, dark_level
 from neuspike.nets.sliding import SlidingRepresentation
 
 __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod", "count_level"]
@@ -41,20 +41,21 @@ ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion",
 CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none",
                  "key_estimates": "none"}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
-#: sensor's gain is known (:func:`count_level`), ``"network"`` as the network outputs it.
+#: sensor's gain is known (:func:`neuspike.methods.counting.level_shift`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
 #: The read-out label of an image whose mean level was counted from the spikes.
 COUNTED = "mean level counted from the spikes"
 
 
 def count_level(sample: Sample) -> float | None:
-    """The mean radiance of the window's frame from its spike count, or None where it cannot be known.
+    """The mean radiance of the window's frame by the linear rule, or None where it cannot be known.
 
-    A pixel of radiance ``x`` fires ``T (gain x + d) - 1/2`` spikes on average over ``T`` planes: ``d``
-    is the dark rate, and the charge left in the integrator at the window's end loses half a spike
-    on average, whether the pixel starts at rest or with a random charge. So
-    ``(mean rate + 1 / (2 T) - d) / gain``, over all the frame's pixels, estimates the frame's mean
-    radiance without bias, and with almost no variance at this many pixels. It needs the gain (a
+    The rule takes a pixel of radiance ``x`` to fire ``T (gain x + d) - 1/2`` spikes over ``T`` planes
+    (``d`` the dark rate, half a spike left in the integrator), so ``(mean rate + 1 / (2 T) - d) / gain``.
+    That holds for pixels that fire a few spikes or more; a dim pixel that starts with Algorithm 1's
+    random charge fires more than it says (0.18 spikes at zero light), so for a dim frame this is too
+    high by up to ``0.68 / (T gain)``. The method's own level does not use it: it shifts its image under
+    the sensor model of :mod:`neuspike.methods.counting`. This quick estimate needs the gain (a
     simulation knows it; a real recording rarely does): None otherwise. The dark rate is the stream's,
     or, where the stream does not know it, estimated from the window
     (:func:`neuspike.methods.normalisation.dark_level`).
@@ -261,7 +262,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         spikes = sample.spikes
         if self.params.get("level", "counts") != "counts" or spikes is None or spike_gain(sample)[1] != "known":
             return image
-        dark_rate, _ = dark_level(spikes)
+        dark_rate, self._dark_how = dark_level(spikes)
         counts = np.count_nonzero(spikes.planes, axis=0)
         shift = level_shift(image, counts, planes=spikes.num_planes, gain=float(spikes.gain), dark_rate=dark_rate,
                             state=initial_state(spikes))
@@ -272,7 +273,7 @@ class NeuSpikeNetMethod(LearnedMethod):
     def _reconstruct(self, sample: Sample) -> tuple[Any, str]:
         image, label = super()._reconstruct(sample)
         if getattr(self, "_level", None) is not None:
-            label = f"{label}; {COUNTED}" + (", dark rate estimated" if sample.spikes.dark_rate is None else "")
+            label = f"{label}; {COUNTED}" + (", dark rate estimated" if self._dark_how == DARK_ESTIMATED else "")
         if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label
