@@ -21,6 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 TRAINED = ROOT / "neuspike" / "trained"
 NETWORKS = ("neuspike-net", "neuspike-net-spike", "e2vid", "firenet-sim")
 OURS = set(NETWORKS)
+#: The last commit whose tree holds the training history of the shipped networks, and each one's folder there.
+HISTORY_COMMIT = "61a150f81431d38169df37943aa4282840d07702"
+HISTORY = {"neuspike-net": "reports/neuspike-net", "neuspike-net-spike": "reports/neuspike-net",
+           "e2vid": "reports/e2vid", "firenet-sim": "reports/e2vid"}
 #: (label, results folder, what it holds)
 REPORTS = (
     ("light sweep", "reports/light", "test photographs, L 1/32 to 1/2, S 128, no noise"),
@@ -81,6 +85,9 @@ def card(name: str) -> str:
         f"**Command:** `python -m neuspike.train {name} --spec spec.json`, the spec written out of the JSON card "
         f"with `python -c \"import json; print(json.dumps(json.load(open('neuspike/trained/{name}.json'))['training']"
         f"['spec']))\" > spec.json`. A run writes into `runs/` only; `--export` replaces this file.",
+        f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
+        f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
+        "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`).",
         f"**Data:** simulated {data.get('kind', '?')} from the training photographs "
         f"({', '.join(data.get('photos', []))})" + (f" and procedural {data['procedural']}" if data.get("procedural") else "")
         + (f" (scene kinds {', '.join(dict.fromkeys(data['kinds']))})" if data.get("kinds") else "")

@@ -1,5 +1,8 @@
 """NeuSpike-Net: the spike + event fusion network and its spike-only variant.
 
+A path written ``61a150f8:reports/neuspike-net/...`` below is a file of the training history, which left
+the tree after that commit: ``git show 61a150f8:reports/neuspike-net/README.md`` prints it.
+
 Architecture (REFERENCE §1.1; :mod:`neuspike.nets.network`): two 3-level strided encoders (64, 128,
 256), the sum of the deepest features through two residual blocks, three transposed-conv decoders
 (128, 64, 32) with concatenated skips, the fusion module F at the two inner skip levels, the
@@ -14,7 +17,7 @@ motion path at each level by gains computed from the representations' un-normali
 that noise-dominated events can be turned down (instance normalisation alone gives them full scale).
 ``transformer="learned"`` adds a learned full-resolution module on each representation (the paper's
 learned T_spike and T_event, whose form is unknown here); against the fixed representations it did
-not win on validation (``reports/neuspike-net/README.md``, stage 21), so the shipped weights keep
+not win on validation (``61a150f8:reports/neuspike-net/README.md``, stage 21), so the shipped weights keep
 ``"fixed"``.
 
 Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
@@ -22,7 +25,7 @@ Designs where the paper is unknown here (:mod:`neuspike.nets.representations`,
 same seed for 80 steps (batch 8, 48x48 crops, AdamW 1e-3, ``python -m neuspike.train neuspike-net
 --steps 80 --crop 48 --param KEY=VALUE``) on windows simulated from the *training* photographs and
 dead-leaves scenes, validated on 24 held-out windows (128x128) of the same distribution; one factor
-changed at a time from A (``reports/neuspike-net/ablation.csv``):
+changed at a time from A (``61a150f8:reports/neuspike-net/ablation.csv``):
 
 ====  =================  ==============  =========  ==================  ==================
 run   T_spike            T_event         F          fusion PSNR / SSIM  spike-only PSNR
@@ -64,7 +67,7 @@ DEFAULT_DESIGN: dict[str, Any] = {"spike_representation": "counts_interval", "ev
                                   "fusion": "gate", "head": "support-count"}
 
 #: What the shipped weights add to it (from stage 25 on; both files are stage 43's,
-#: ``reports/neuspike-net/README.md``): the interval sequence at the key instant, weighed by
+#: ``61a150f8:reports/neuspike-net/README.md``): the interval sequence at the key instant, weighed by
 #: :class:`~neuspike.nets.network.KeyRefine`.
 SHIPPED_DESIGN: dict[str, Any] = {"key_estimates": "isi-sequence"}
 

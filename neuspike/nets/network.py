@@ -64,7 +64,7 @@ Motion gate (``motion_gate``):
   the image mix a few strong edges with the flat background; the quantiles see the background,
   where sensor noise is. On stage 38's training windows a 32-unit MLP tells the high noise level
   from the others on 97.3 % of held-out windows with both sets, 91.7 % with the 128 statistics
-  alone (``reports/neuspike-net/gate_probe.py --separability``). Its last layer starts at zero (gains
+  alone (``61a150f8:reports/neuspike-net/gate_probe.py --separability``). Its last layer starts at zero (gains
   1), so ``"stats"`` weights load and compute exactly what they computed; it is the part that the
   trainer's ``gate_targets`` supervise where present.
 
@@ -86,7 +86,7 @@ Support cue (``support_cue``; the ``"support-count"`` head only):
 * ``"none"`` (default): the softmax that chooses the temporal support comes from the decoder
   features alone. Instance normalisation has removed their scale, and nothing in them says how fast
   a pixel's radiance changes within the window: on fast pans the support does not narrow with speed
-  (``reports/neuspike-net/fast_motion_probe.py``).
+  (``61a150f8:reports/neuspike-net/fast_motion_probe.py``).
 * ``"spread"``: two full-resolution statistics of the 16 group rates, counted in spikes (``n_g =
   rate_g / q``; ``"support-count"`` only, which has the quantum ``q``): the dispersion
   ``log1p(var_g n / (mean_g n + 1))`` (near 0 where the radiance is constant, since an

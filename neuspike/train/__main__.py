@@ -61,10 +61,10 @@ spec.json, checkpoint.pt, train_log.csv and the best-by-validation weights with 
 Running the same command again resumes from the checkpoint (a different spec is refused)."""
 
 EPILOG = """\
-examples (the commands behind the shipped weights are in reports/<network>/README.md):
+examples (the spec behind each shipped network is in its JSON card; its model card says how to run it):
   python -m neuspike.train neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 \\
       --val-windows 32 --val-every 200 --lr 1e-3 --warmup 100 --threads 1 --export
-  python -m neuspike.train neuspike-net --spec reports/neuspike-net/spec_stage2.json --export
+  python -m neuspike.train neuspike-net --spec spec.json --out runs/nsn-again   # a spec file, as written
   python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
   python -m neuspike.train e2vid --device cuda            # on a GPU (--device cpu resumes it on a CPU)
   python -m neuspike.train e2vid --quick                  # a one-minute smoke run (its weights stay in runs/)"""

@@ -40,7 +40,7 @@ uniform region far from any edge, a recording's first window) is whatever patter
 zero padding leave. The term says nothing about the image's level. It costs one window more per step.
 (On ``e2vid`` it flattened that pattern to FireNet's within 120 steps without changing a score: the pattern was
 broader than SSIM's window, and the scores of such scenes follow the blank image's level;
-``reports/e2vid/candidates/README.md``, stage 26.)
+``61a150f8:reports/e2vid/candidates/README.md``, stage 26.)
 
 Partial first windows (``partial_first`` > 0, default 0): every item's windows hold their full count,
 but a scene that gives few events, evaluated with the methods' bounded history, hands the network a
