@@ -156,6 +156,10 @@ class NeuSpikeNetMethod(LearnedMethod):
         ``"none"`` (default; the shipped weights) or ``"isi-sequence"``: the interval sequence around
         the key instant appended to the spike input and weighed by
         :class:`~neuspike.nets.network.KeyRefine` (``"support-count"`` head only).
+    width, head_kernel : float, int
+        The network's width multiplier and prediction kernel (:class:`~neuspike.nets.network.NeuSpikeNet`):
+        1 and 3 (the defaults) are the full network; the compact variants take ``LITE_DESIGN``. Kept out of
+        ``params`` at their defaults, so the full networks' parameters read as they always have.
     level : str
         ``"counts"`` (default): where the sensor's gain is known, the image is shifted so that the
         spikes it predicts, pixel by pixel under the sensor model of how the window began
@@ -174,13 +178,18 @@ class NeuSpikeNetMethod(LearnedMethod):
     def __init__(self, name: str | None = None, *, spike_representation: str, event_representation: str,
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
                  motion_gate: str = "none", transformer: str = "fixed", support_cue: str = "none",
-                 key_estimates: str = "none", level: str = "counts", **learned: Any) -> None:
+                 key_estimates: str = "none", level: str = "counts", width: float = 1.0, head_kernel: int = 3,
+                 **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
                            transformer=transformer, support_cue=support_cue, key_estimates=key_estimates))
         if level not in LEVELS:
             raise InputError(f"level: expected one of {LEVELS}, got {level!r}")
         self.inputs = frozenset({"spikes"}) if spike_only else frozenset({"spikes", "events"})
+        if float(width) != 1.0:
+            learned["width"] = width
+        if head_kernel != 3:
+            learned["head_kernel"] = head_kernel
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
@@ -195,7 +204,8 @@ class NeuSpikeNetMethod(LearnedMethod):
         return NeuSpikeNet(fusion=p["fusion"], spike_only=p["spike_only"],
                            event_skip_weight=float(p.get("event_skip_weight", 1.0)), head=p.get("head", "tanh"),
                            motion_gate=p.get("motion_gate", "none"), transformer=p.get("transformer", "fixed"),
-                           support_cue=p.get("support_cue", "none"), key_estimates=p.get("key_estimates", "none"))
+                           support_cue=p.get("support_cue", "none"), key_estimates=p.get("key_estimates", "none"),
+                           width=p.get("width", 1.0), head_kernel=p.get("head_kernel", 3))
 
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """One step: (spikes,) or (spikes, events), each float32 (1, 32, H, W), and with the

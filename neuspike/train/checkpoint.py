@@ -46,7 +46,7 @@ SPEC, CHECKPOINT, LOG = "spec.json", "checkpoint.pt", "train_log.csv"
 CHECKPOINT_FORMAT = 2
 LOG_COLUMNS = ("step", "kind", "variant", "loss", "l1", "ssim_loss", "temporal", "lr", "seconds", "samples_per_s",
                "wall_s", "val_l1", "val_psnr", "val_ssim", "val_ssim_last", "support_l1",
-               "edge_ssim_loss", "spike_floor", "gate_target", "empty_spread")
+               "edge_ssim_loss", "spike_floor", "gate_target", "empty_spread", "distill")
 #: Validation scores of the log (a row of the sequence trainer held them beside the step's loss).
 _VAL_COLUMNS = ("val_l1", "val_psnr", "val_ssim", "val_ssim_last")
 

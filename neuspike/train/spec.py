@@ -617,6 +617,16 @@ class TrainSpec:
         Also write the best weights into the package's ``neuspike/trained/``.
     export_dir : str or None
         Also write the best weights into this folder.
+    teacher : str or None
+        Distillation (single windows only): a trained network of the same method (a ``.safetensors`` with
+        its JSON card beside it, e.g. the shipped full ``neuspike-net``) run on each step's inputs in the
+        step's variant, without gradient; the student also learns to match its image. Its architecture
+        comes from its card, so a compact student (``params`` of ``LITE_DESIGN``) learns from the full
+        network. A fusion student needs a fusion teacher (its spike-only steps ask the teacher's
+        spike-only path). Default None.
+    distill_weight : float
+        With ``teacher``: adds ``distill_weight`` * (L1 + ``ssim_weight`` * SSIM loss) of the student's
+        image against the teacher's. > 0 with a teacher, 0 (the default) without.
     """
 
     method: str = "neuspike-net"
@@ -642,6 +652,8 @@ class TrainSpec:
     part_lr_scales: dict[str, float] = field(default_factory=dict)
     export: bool = False
     export_dir: str | None = None
+    teacher: str | None = None
+    distill_weight: float = 0.0
 
     #: Fields that do not change what a run computes (the device only its rounding): a resumed run may change them.
     NOT_IDENTITY: ClassVar[tuple[str, ...]] = ("out_dir", "threads", "device", "export", "export_dir")
@@ -679,6 +691,17 @@ class TrainSpec:
         put(self, "part_lr_scales", {k: float(v) for k, v in self.part_lr_scales.items()})
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
+        put(self, "distill_weight", _loss_weight("distill_weight", self.distill_weight))
+        if self.teacher is not None:
+            if not str(self.teacher).endswith(".safetensors"):
+                raise InputError(f"teacher: expected a .safetensors file, got {self.teacher!r}")
+            if not isinstance(self.data, WindowData):
+                raise InputError("teacher: distillation trains on single windows (neuspike-net); this spec's data are "
+                                 "sequences")
+            if not self.distill_weight:
+                raise InputError("teacher: give distill_weight > 0 (the weight of the teacher's term)")
+        elif self.distill_weight:
+            raise InputError(f"distill_weight {self.distill_weight}: needs a teacher (a trained network's .safetensors)")
         if isinstance(self.data, WindowData):
             if self.data.train_parts != "all" and self.init_from is None:
                 raise InputError(f"train_parts {self.data.train_parts!r}: holds the other parts as init_from gives "

@@ -372,9 +372,44 @@ class WindowTask:
         if self.data.gate_targets is not None and self.supervised_gate is None:
             raise InputError("gate_targets: the network has no motion gate to supervise (a fusion network with "
                              "params motion_gate 'stats', 'stats-local' or 'stats-noise')")
+        self.teacher = self._teacher(spec.teacher) if spec.teacher is not None else None
         if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
             raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")
+
+    def _teacher(self, path: str) -> torch.nn.Module:
+        """The teacher's module (``spec.teacher``): built from its JSON card's parameters, loaded strictly,
+        held in eval mode without gradient."""
+        from neuspike.methods.weights import load_safetensors, load_state_strict
+
+        weights, card = Path(path), Path(path).with_suffix(".json")
+        if not weights.is_file():
+            raise InputError(f"teacher {path}: no such file")
+        if not card.is_file():
+            raise InputError(f"teacher {path}: no JSON card beside it ({card.name}), which says its architecture")
+        try:
+            meta = json.loads(card.read_text())
+            params = dict(meta["model"]["params"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise InputError(f"teacher {path}: its card {card.name} has no model parameters ({exc})") from None
+        if meta.get("method", self.spec.method).replace("-spike", "") != self.spec.method.replace("-spike", ""):
+            raise InputError(f"teacher {path}: a {meta.get('method')!r} network; the student is {self.spec.method!r}")
+        if self.fusion and params.get("spike_only", True):
+            raise InputError(f"teacher {path}: a spike-only network cannot teach the fusion network's fusion steps "
+                             "(give the full fusion network's weights)")
+        teacher = type(self.method).for_training(self.spec.method, device=self.device, **params)
+        load_state_strict(teacher.module, load_safetensors(str(weights)), str(weights))
+        module = teacher.module.float().eval()
+        for p in module.parameters():
+            p.requires_grad_(False)
+        return module
+
+    def teacher_image(self, inputs: Sequence[torch.Tensor], variant: str) -> torch.Tensor:
+        """The teacher's image of ``inputs`` in ``variant`` (no gradient)."""
+        with torch.no_grad():
+            if variant == "spike" and not getattr(self.teacher, "spike_only", False):
+                return self.teacher.forward_texture_only(inputs[0], *inputs[2:])
+            return self.teacher(*inputs)
 
     # -- data --------------------------------------------------------------------------------------
 
@@ -583,6 +618,13 @@ class WindowTask:
             miss = ((gains[0].float() - value).square() * mask).sum() / mask.sum()
             loss = loss + self.data.gate_target_weight * miss
             parts["gate_target"] = miss.item()
+        if self.teacher is not None:
+            with autocast():
+                taught = self.teacher_image(inputs, variant).float()
+            image = (pred[0] if isinstance(pred, tuple) else pred).float()
+            distill = self.crop_losses(image, taught).mean()
+            loss = loss + self.spec.distill_weight * distill
+            parts["distill"] = distill.item()
         weights = self.floor_weights(step) if variant == "fusion" else None
         if weights is not None:
             with torch.no_grad(), autocast():
