@@ -53,6 +53,3 @@ def register_methods(register: Callable[..., object] | None = None) -> None:
     if problems:
         raise ImportError("some baselines could not be registered: " + "; ".join(problems))
 
-
-#: The name the ``neuspike.methods`` entry point used before the contract was unified.
-register_all = register_methods

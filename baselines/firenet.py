@@ -81,7 +81,7 @@ from torch import nn
 
 from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.errors import FormatError, InputError
-from neuspike.methods.learned import CLAMP, LearnedMethod
+from neuspike.methods.learned import LearnedMethod
 from neuspike.methods import WeightsConfig
 from neuspike.nn import ConvGRU, ResidualBlock
 from neuspike.methods.representations import event_windows, voxel_grid

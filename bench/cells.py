@@ -56,7 +56,7 @@ from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evalua
 from neuspike.simulation.cache import RecordingCache
 from neuspike.simulation.cell import simulate_recording
 from neuspike.simulation.recording import Recording, SensorConfig
-from neuspike.simulation.window import sample_rng, static_region
+from neuspike.simulation.window import static_region
 
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
@@ -243,11 +243,6 @@ def instances(names: tuple[str, ...] | list[str], setup: WorkerSetup) -> dict[st
 # ----------------------------------------------------------------------------------------------
 # Running a cell
 # ----------------------------------------------------------------------------------------------
-
-def cell_rng(cell: Cell) -> np.random.Generator:
-    """The generator of every random draw of the cell's simulation."""
-    return sample_rng(cell.seed, cell.scene.spec, cell.condition)
-
 
 def simulate_cell(task: CellTask) -> tuple[Recording, frozenset[str]]:
     """The cell's recording, from the cache or simulated (then cached). Returns ``(recording, modalities simulated now)``."""

@@ -36,7 +36,7 @@ from bench.results import method_descriptions, tfp_windows
 
 #: The ``implementation`` of the NeuSpike-Net methods in their description.
 NEUSPIKE_NET_IMPLEMENTATION = "neuspike.nets.method.NeuSpikeNetMethod"
-from bench.tables import axis_label, axis_means, method_families, ok_rows, safe_name, swept_axes
+from bench.tables import axis_label, axis_means, method_families, ok_rows, swept_axes
 from neuspike.errors import one_line
 
 HOLDS = "holds"

@@ -191,11 +191,6 @@ def drop_timing(frame: pd.DataFrame) -> pd.DataFrame:
     return frame.drop(columns=[c for c in TIMING_COLUMNS if c in frame.columns])
 
 
-def cell_status(frame: pd.DataFrame) -> str:
-    """``error`` if any row of one cell's rows failed, else ``ok`` (skips are not failures)."""
-    return ERROR if (frame["status"] == ERROR).any() else OK
-
-
 def base_row(**fields: Any) -> dict[str, Any]:
     """A row with every column, defaults for the ones not given (NaN numbers, empty text)."""
     row: dict[str, Any] = {c: ("" if _DTYPES[c] is str else np.nan) for c in COLUMNS}

@@ -18,18 +18,6 @@ def check_ndim(name: str, array: np.ndarray, ndim: int) -> None:
         raise InputError(f"{name}: expected a {ndim}-D array, got shape {np.shape(array)}")
 
 
-def check_finite_nonnegative(name: str, array: np.ndarray) -> None:
-    """Raise if ``array`` holds NaN, infinity or a negative value."""
-    a = np.asarray(array)
-    if a.size == 0:
-        return
-    if not np.isfinite(a).all():
-        bad = int(np.count_nonzero(~np.isfinite(a)))
-        raise InputError(f"{name}: expected finite values, got {bad} NaN or infinite entries")
-    lo = a.min()
-    if lo < 0:
-        raise InputError(f"{name}: expected values >= 0, got a minimum of {float(lo)!r}")
-
 
 def _float(name: str, value: Any, what: str) -> float:
     """``value`` as a float, or :class:`InputError` saying ``expected {what}`` (``true`` is not a number)."""

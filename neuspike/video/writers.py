@@ -10,7 +10,6 @@ Images are float (H, W) in [0, 1]; 8-bit conversion is :func:`neuspike.formats.i
 
 from __future__ import annotations
 
-import io
 import os
 import shutil
 from pathlib import Path
@@ -267,8 +266,3 @@ def check_writable(folder: str | os.PathLike) -> Path:
     return p
 
 
-def npy_bytes(array: np.ndarray) -> bytes:
-    """``np.save`` into memory."""
-    buf = io.BytesIO()
-    np.save(buf, array)
-    return buf.getvalue()

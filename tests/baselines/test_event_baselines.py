@@ -10,13 +10,10 @@ cases (no events, one event, a burst of a million events, sensor sizes that are 
 from __future__ import annotations
 
 import math
-import os
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
 import baselines.event_integration as event_module
 import baselines.firenet as firenet_module
@@ -205,7 +202,7 @@ def test_running_event_sum_equals_a_fresh_sum_along_a_stream(alpha):
     t = np.sort(t)
     stream = EventStream(t, rng.integers(0, w, n), rng.integers(0, h, n), rng.choice(np.array([-1, 1]), n), w, h)
     running = RunningEventSum()
-    previous, refused = None, 0
+    previous, prev_first, refused = None, None, 0
     #        (instant, history): instants on the grid; 0.2-0.26 sit in the quiet stretch (empty slices)
     plan = [(0.05, 0.02), (0.051, 0.02), (0.051, 0.02), (0.09, 0.02), (0.12, 0.06), (0.2, 0.02), (0.26, 0.02),
             (0.3, 0.02), (0.301, 0.02), (0.35, 0.06), (0.36, 0.01), (0.33, 0.01), (0.39, 0.01)]

@@ -6,7 +6,6 @@ Tests that need the published weights skip when the shared folder is absent.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np

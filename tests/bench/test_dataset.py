@@ -331,8 +331,6 @@ def test_a_recording_replaced_by_one_of_the_same_size_is_scored_again(spike_gt, 
 
 def test_a_manifest_that_asks_for_millions_of_instants_is_refused_before_any_work(spike_gt, tmp_path, capsys):
     """every_planes 1 on an event recording of a long span: refused with the count and a step that fits."""
-    from neuspike.errors import InputError
-
     manifest = {"manifest": 1, "recordings": [{"name": "long", "spikes": "spike/pan.npz", "gain": LIGHT,
                                               "window_planes": 32, "instants": {"every_planes": 1}}]}
     saved, mf.MAX_INSTANTS = mf.MAX_INSTANTS, 10

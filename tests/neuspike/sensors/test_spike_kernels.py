@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 
-from neuspike.conditions import effect
 from neuspike.errors import InputError
 from neuspike.formats.vidar_dat import DatWriter, read_dat, write_dat
 from neuspike.sensors import spike_camera

@@ -444,7 +444,6 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     keeps the shard key and old specs (0), is refused for a tanh head and for bad weights; a run with
     it trains and its log keeps the column."""
     from neuspike.methods import create
-    from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask
 
     method = create("neuspike-net", precision="float32")
@@ -483,7 +482,6 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     import kornia
 
     from neuspike.methods import create
-    from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask, edge_mask
     from bench.fast_motion import edge_mask as report_edges
 
