@@ -77,6 +77,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spec", help="run this spec.json (of this trainer or an earlier one) as written: beside it only "
                                   "--out, --device, --threads, --shard, --workers, --export, --no-export, --export-dir "
                                   "and the run options apply; a flag that would change what it trains is refused")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
+                   help="set a field of the spec (of --spec's file, or of the one the flags make), checked as a spec "
+                        "file is; KEY dotted into a section, VALUE JSON or text, repeatable: --set lr=1e-4 "
+                        "--set data.speed_range=[2000,24000] --set params.width=0.45")
     p.add_argument("--out", "--run-dir", dest="out", help="run folder (default runs/METHOD)")
     p.add_argument("--shard", "--shards", dest="shard",
                    help="folder of the simulated data (default runs/shard for windows, runs/shards for sequences)")
@@ -262,7 +266,21 @@ def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
 
 
 def spec_from_args(args: argparse.Namespace):
-    """The :class:`~neuspike.train.spec.TrainSpec` of parsed arguments (imports the registry)."""
+    """The :class:`~neuspike.train.spec.TrainSpec` of parsed arguments (imports the registry): ``--spec``'s
+    file or the flags' spec, then each ``--set``."""
+    from neuspike.errors import InputError
+    from neuspike.train.spec import apply_settings
+
+    spec = _spec_of_flags(args)
+    if args.settings:
+        spec = apply_settings(spec, args.settings)
+        if spec.method != args.method:
+            raise InputError(f"--set method: the command trains {args.method!r}")
+    return spec
+
+
+def _spec_of_flags(args: argparse.Namespace):
+    """The spec of ``--spec`` or of the flags, before ``--set``."""
     from dataclasses import replace
 
     from neuspike.errors import InputError
@@ -275,8 +293,8 @@ def spec_from_args(args: argparse.Namespace):
         if given:
             flags = ", ".join("--" + n.replace("_", "-") for n in given)
             raise InputError(f"--spec runs {args.spec} as written; {flags} would change what it trains: edit the file "
-                             f"instead (beside a spec file only --out, --device, --threads, --shard, --workers, "
-                             f"--export, --no-export, --export-dir and the run options apply)")
+                             f"or give --set KEY=VALUE (beside a spec file only --set, --out, --device, --threads, "
+                             f"--shard, --workers, --export, --no-export, --export-dir and the run options apply)")
         if args.export and args.no_export:
             raise InputError("--export and --no-export: choose one")
         spec = load_spec(args.spec, out_dir=args.out or f"runs/{args.method}")

@@ -20,7 +20,7 @@ import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, ClassVar, Mapping, Union
+from typing import Any, ClassVar, Mapping, Sequence, Union
 
 from neuspike.errors import InputError
 from neuspike.utils.checks import check_int
@@ -826,6 +826,39 @@ def load_spec(path: str | Path, *, out_dir: str | None = None) -> TrainSpec:
     if not isinstance(data, dict):
         raise InputError(f"{path}: expected a JSON object")
     return spec_from_dict(data, where=str(path), out_dir=out_dir)
+
+
+def apply_settings(spec: TrainSpec, settings: Sequence[str]) -> TrainSpec:
+    """``spec`` with each ``KEY=VALUE`` of ``settings`` set (``--set``), checked as a spec file is.
+
+    ``KEY`` is a field of the spec or, dotted, of one of its sections: ``lr=1e-4``,
+    ``data.speed_range=[2000,24000]``, ``params.width=0.45``, ``data.noise_levels=["high"]``. ``VALUE`` is
+    JSON, or else taken as text (``init_from=runs/a/neuspike-net.safetensors``). A key the spec does not
+    have is refused by name, as in a spec file; the data section's ``kind`` cannot change.
+    """
+    d = spec.as_dict()
+    for item in settings:
+        key, sep, raw = str(item).partition("=")
+        parts = key.strip().split(".")
+        if not sep or not all(parts):
+            raise InputError(f"--set: expected KEY=VALUE (e.g. lr=1e-4, data.speed_range=[2000,24000]), got {item!r}")
+        try:
+            value = json.loads(raw)
+        except ValueError:
+            value = raw
+        node: Any = d
+        for depth, part in enumerate(parts[:-1]):
+            if part not in node and depth == 0 and part in ("params", "part_lr_scales"):
+                node[part] = {}
+            node = node.get(part) if isinstance(node, dict) else None
+            if not isinstance(node, dict):
+                sections = ", ".join(k for k, v in d.items() if isinstance(v, dict))
+                raise InputError(f"--set {key}: {'.'.join(parts[:depth + 1])} is not a section of the spec "
+                                 f"(its sections: {sections})")
+        if node is d.get("data") and parts[-1] == "kind":
+            raise InputError(f"--set {key}: the data kind follows from the method ({d['data']['kind']})")
+        node[parts[-1]] = value
+    return spec_from_dict(d, where="--set")
 
 
 def with_out_dir(spec: TrainSpec, out_dir: str) -> TrainSpec:
