@@ -64,7 +64,8 @@ def robust_scale(estimate: np.ndarray, *, percentile: float = ROBUST_PERCENTILE)
 
 
 def estimate_dark_rate(planes: np.ndarray, *, block_px: int = DARK_BLOCK_PX,
-                       percentile: float = DARK_PERCENTILE, cap: float = DARK_RATE_CAP) -> float:
+                       percentile: float = DARK_PERCENTILE, cap: float = DARK_RATE_CAP,
+                       counts: np.ndarray | None = None) -> float:
     """The dark rate of a spike window estimated from its planes alone.
 
     The window's per-pixel rate is averaged over ``block_px`` x ``block_px`` blocks (a block of 64
@@ -81,6 +82,9 @@ def estimate_dark_rate(planes: np.ndarray, *, block_px: int = DARK_BLOCK_PX,
         Which block rate counts as dark, in [0, 100].
     cap : float
         The largest rate returned (module docstring).
+    counts : ndarray (H, W), optional
+        ``np.count_nonzero(planes, axis=0)`` where the caller has it already (the same estimate, one
+        pass over the planes fewer).
 
     Returns
     -------
@@ -93,18 +97,23 @@ def estimate_dark_rate(planes: np.ndarray, *, block_px: int = DARK_BLOCK_PX,
     if planes.ndim != 3 or planes.shape[0] == 0:
         raise ValueError(f"planes: expected shape (T, H, W) with T >= 1, got {planes.shape}")
     t, h, w = planes.shape
-    rate = np.count_nonzero(planes, axis=0).astype(np.float64) / t
+    if counts is None:
+        counts = np.count_nonzero(planes, axis=0)
+    elif np.shape(counts) != (h, w):
+        raise ValueError(f"counts: expected shape {(h, w)}, got {np.shape(counts)}")
+    rate = np.asarray(counts).astype(np.float64) / t
     bh, bw = min(block_px, h), min(block_px, w)
     rows, cols = h // bh, w // bw
     blocks = rate[:rows * bh, :cols * bw].reshape(rows, bh, cols, bw).mean(axis=(1, 3))
     return min(float(cap), max(0.0, float(np.percentile(blocks, percentile))))
 
 
-def dark_level(stream: "SpikeStream") -> tuple[float, str]:
-    """``(dark rate, how)``: the stream's own (``"known"``) or :func:`estimate_dark_rate` of its planes."""
+def dark_level(stream: "SpikeStream", counts: np.ndarray | None = None) -> tuple[float, str]:
+    """``(dark rate, how)``: the stream's own (``"known"``) or :func:`estimate_dark_rate` of its planes
+    (``counts``: their per-pixel spike counts, where the caller has them)."""
     if stream.dark_rate is not None:
         return float(stream.dark_rate), DARK_KNOWN
-    return estimate_dark_rate(stream.planes), DARK_ESTIMATED
+    return estimate_dark_rate(stream.planes, counts=counts), DARK_ESTIMATED
 
 
 def dark_note(dark_rate: float, how: str) -> str:

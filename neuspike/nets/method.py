@@ -40,6 +40,8 @@ ARCHITECTURE_PARAMS = ("spike_representation", "event_representation", "fusion",
 #: What an architecture parameter means when a weights card (written before it existed) lacks it.
 CARD_DEFAULTS = {"head": "tanh", "motion_gate": "none", "transformer": "fixed", "support_cue": "none",
                  "key_estimates": "none"}
+#: Architecture parameters kept out of ``params`` at their defaults (the full network), checked against a card too.
+SIZE_DEFAULTS = {"width": 1.0, "head_kernel": 3}
 #: How the image's mean level is set (``level``): ``"counts"`` from the window's spike count where the
 #: sensor's gain is known (:func:`neuspike.methods.counting.level_shift`), ``"network"`` as the network outputs it.
 LEVELS = ("counts", "network")
@@ -272,8 +274,8 @@ class NeuSpikeNetMethod(LearnedMethod):
         spikes = sample.spikes
         if self.params.get("level", "counts") != "counts" or spikes is None or spike_gain(sample)[1] != "known":
             return image
-        dark_rate, self._dark_how = dark_level(spikes)
-        counts = np.count_nonzero(spikes.planes, axis=0)
+        counts = np.count_nonzero(spikes.planes, axis=0)  # one pass, shared with the dark estimate
+        dark_rate, self._dark_how = dark_level(spikes, counts)
         shift = level_shift(image, counts, planes=spikes.num_planes, gain=float(spikes.gain), dark_rate=dark_rate,
                             state=initial_state(spikes))
         image = np.clip(image + np.float32(shift), 0.0, 1.0)
@@ -295,6 +297,8 @@ class NeuSpikeNetMethod(LearnedMethod):
         if trained is not None:
             ours = {k: self.params[k] for k in ARCHITECTURE_PARAMS}
             theirs = {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in ARCHITECTURE_PARAMS}
+            ours.update({k: self.params.get(k, v) for k, v in SIZE_DEFAULTS.items()})
+            theirs.update({k: trained.get(k, v) for k, v in SIZE_DEFAULTS.items()})
             if ours != theirs:
                 raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")
         return super().load_weights(module, path)

@@ -93,6 +93,10 @@ def test_an_unknown_dark_rate_is_estimated_from_the_black_in_view():
     unknown = SpikeStream(stream.planes, gain=stream.gain)  # as a bare .dat with a gain given
     rate, how = dark_level(unknown)
     assert (rate, how) == (estimate, "estimated")
+    counts = np.count_nonzero(stream.planes, axis=0)  # the counts a caller has already: the same estimate
+    assert dark_level(unknown, counts) == (estimate, "estimated")
+    with pytest.raises(ValueError, match="counts: expected shape"):
+        estimate_dark_rate(stream.planes, counts=counts[1:])
     image, label = stream_rate_to_image(unknown.planes.mean(axis=0), unknown)
     assert label == "gain, dark rate estimated"
     assert abs(float(image[:, : W // 2].mean())) < 0.03

@@ -74,3 +74,19 @@ def test_the_method_keeps_full_parameters_as_they_were_and_records_the_lite_ones
     lite = NeuSpikeNetMethod.for_training("neuspike-net-spike", **{**params, **LITE_DESIGN})
     assert lite.params["width"] == LITE_DESIGN["width"] and lite.params["head_kernel"] == 1
     assert lite.module.width == LITE_DESIGN["width"]
+
+
+def test_weights_of_one_size_are_refused_by_a_method_of_another(tmp_path):
+    """A card records the width; a full method refuses a compact file by its design, not by a shape error."""
+    from neuspike.errors import FormatError
+    from neuspike.methods import create
+    from neuspike.methods.weights import save_safetensors
+    from neuspike.nets.method import NeuSpikeNetMethod
+
+    full = create("neuspike-net-spike")
+    params = {k: v for k, v in full.params.items() if k not in ("precision", "weights_file")}
+    lite = NeuSpikeNetMethod.for_training("neuspike-net-spike", **{**params, **LITE_DESIGN})
+    path = tmp_path / "lite.safetensors"
+    save_safetensors(lite.module, path, card={"model": {"params": {**params, **LITE_DESIGN}}})
+    with pytest.raises(FormatError, match="trained for .*'width': 0.45"):
+        NeuSpikeNetMethod("neuspike-net-spike", weights_file=path.name, weights_dir=tmp_path, **params)
