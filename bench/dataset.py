@@ -1,8 +1,8 @@
 """Every method on a folder of real or peer recordings: ``python -m bench.dataset DIR``.
 
 The command: it reads the manifest (``--manifest``) or infers one from the folder's layout
-(:mod:`bench.manifest`), checks it against the files before any work, and runs
-:func:`bench.datasets.run_dataset` (outputs, resuming and scoring are described there). Only light
+(:mod:`bench.harness.manifest`), checks it against the files before any work, and runs
+:func:`bench.harness.datasets.run_dataset` (outputs, resuming and scoring are described there). Only light
 modules are imported before the arguments are parsed, so ``--help`` and usage errors answer at once.
 """
 
@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Sequence
 
-from bench.executors import EXECUTORS
+from bench.harness.executors import EXECUTORS
 from neuspike.errors import InputError, NeuSpikeError
 
 EPILOG = """\
@@ -30,7 +30,7 @@ layouts read without a manifest (--layout auto picks the one the folder is in):
 The manifest used (inferred or given) is written to OUT/manifest.json: rerun with --manifest
 OUT/manifest.json to repeat the run exactly, or edit it (instants: a key plane, a list of planes
 or times, or every N planes; window; gain; ground truth per instant). Its format is described in
-bench/manifest.py.
+bench/harness/manifest.py.
 
 scoring: PSNR and SSIM (data_range 1, the pinned SSIM settings) and their affine-aligned variants
 where the manifest names a ground truth; the no-reference measures noise_sigma and laplacian_var
@@ -117,9 +117,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     t0 = time.perf_counter()
     try:
-        from bench import manifest as mf
-        from bench.datasets import DatasetSpec, prepare, run_dataset
-        from bench.harness import Execution
+        from bench.harness import manifest as mf
+        from bench.harness.datasets import DatasetSpec, prepare, run_dataset
+        from bench.harness.runner import Execution
         from neuspike import methods as registry
         from neuspike.formats.staging import check_writable_folder
         from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
@@ -167,6 +167,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             report=not args.no_report,
         )
         outcome = run_dataset(spec, out, execution, resolved=resolved)
+        if execution.report:
+            from bench.reporting.build import report_after_run
+
+            report_after_run(outcome)
     except KeyboardInterrupt:
         print("interrupted: finished instants are saved; rerun the same command to resume", file=sys.stderr)
         return 130

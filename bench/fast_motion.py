@@ -34,11 +34,11 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
-from bench import grid as grids
+from bench.harness import grid as grids
 from bench.sweep import COMMON_EPILOG, add_common_arguments, run_command, spec_from_args
 from neuspike.errors import InputError
 
-#: Pan speeds, in multiples of the sweeps' (:data:`bench.grid.PAN_SPEED_PX_S_AT_400`).
+#: Pan speeds, in multiples of the sweeps' (:data:`bench.harness.grid.PAN_SPEED_PX_S_AT_400`).
 SPEEDS = (1, 2, 4, 8, 16)
 LIGHTS = "1/4,1/16"
 MOTION = "256"
@@ -98,7 +98,7 @@ def summarise(out: Path) -> dict[str, Any]:
     """Write ``fast_motion.csv`` and ``fast_motion.md`` from ``out/results.csv``; return the table."""
     import pandas as pd
 
-    from bench.results import read_csv
+    from bench.harness.results import read_csv
     from neuspike.utils.atomic import write_text
 
     rows = read_csv(out / "results.csv")

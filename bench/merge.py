@@ -63,7 +63,7 @@ def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
         raise InputError(f"{folder}: unreadable JSON ({exc})") from exc
     if "sweep" not in config:
         raise InputError(f"{folder}/config.json: no 'sweep' section (not written by bench.sweep or bench.noise)")
-    from bench.results import read_csv
+    from bench.harness.results import read_csv
 
     frame = read_csv(paths["results.csv"])
     key = [*CELL_KEY, "method", "metric"]
@@ -81,7 +81,7 @@ def _identity(sweep: dict[str, Any]) -> dict[str, Any]:
     The device is part of it (a folder from before the device was recorded ran on the CPU); each
     method's precision travels with its rows (see :func:`merge_sweeps`).
     """
-    from bench.harness import LEGACY_DEVICE
+    from bench.harness.runner import LEGACY_DEVICE
 
     resolved = sweep.get("resolved", {})
     return {
@@ -111,7 +111,7 @@ def merge_sweeps(out: str | Path, folders: Sequence[str | Path], *, replace: boo
     """
     import pandas as pd
 
-    from bench.results import sort_rows, to_csv_text
+    from bench.harness.results import sort_rows, to_csv_text
 
     folders = [Path(f) for f in folders]
     if len(folders) < 2:
@@ -222,7 +222,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"merged {merged['method'].nunique()} methods over "
           f"{len(merged.drop_duplicates(list(CELL_KEY)))} cells into {args.out}/results.csv")
     if not args.no_report:
-        from bench.reporting import build_report
+        from bench.reporting.build import build_report
 
         print(f"report: {build_report(Path(args.out))}")
     return 0

@@ -1,10 +1,10 @@
 """Milliseconds per reconstructed frame of every method at 400x250: ``python -m bench.method_speed``.
 
 Every registered method (or ``--methods``) reconstructs from one representative recording at the
-Vidar size, 400x250 (:func:`bench.timer.representative_sample`: the ``camera`` photograph panning,
+Vidar size, 400x250 (:func:`bench.harness.timer.representative_sample`: the ``camera`` photograph panning,
 L = 1/4, S = 128, a 256-plane window, events with one window of history): ``--warmup`` untimed calls,
 then the median and spread of ``--repeats`` timed calls, each after ``reset()``
-(:func:`bench.timer.time_method`, the same code as Table 2).
+(:func:`bench.harness.timer.time_method`, the same code as Table 2).
 
 Columns
     ``T=256``    ms per call on the full 256-plane window (the sweeps' window)
@@ -126,7 +126,7 @@ def tfp_reference_row(window: int) -> str:
 
 
 def _time_row(name: str, fn: Callable[[], Any], column: str, *, repeats: int, warmup: int) -> dict[str, Any]:
-    from bench import timer
+    from bench.harness import timer
 
     stats = timer.time_callable(fn, repeats=repeats, warmup=warmup).summary()
     return {"method": name, "family": "reference", "status": "ok", "error": "",
@@ -163,7 +163,7 @@ def reference_rows(names: Sequence[str], created: dict[str, tuple[Any, str]], sa
 # --- measuring ----------------------------------------------------------------------------------
 
 def _spread(row: dict[str, Any], prefix: str) -> str:
-    from bench import tables as tb
+    from bench.reporting import tables as tb
 
     med = row.get(f"{prefix}_median")
     if med is None or (isinstance(med, float) and math.isnan(med)):
@@ -188,7 +188,7 @@ def thread_counts() -> dict[str, int]:
 
 def pin_threads(threads: int) -> dict[str, int]:
     """Set torch's intra-op pool and numba's pool to ``threads`` (numba: at most its launch count)."""
-    from bench import timer
+    from bench.harness import timer
 
     set_threads(timer.check_count("threads", threads, 1))
     return thread_counts()
@@ -196,7 +196,7 @@ def pin_threads(threads: int) -> dict[str, int]:
 
 def load_average() -> float:
     """The 1-minute load average (NaN where the system has none)."""
-    from bench.provenance import load_1min
+    from bench.harness.provenance import load_1min
 
     load = load_1min()
     return math.nan if load is None else load
@@ -209,7 +209,7 @@ def judge(frame: pd.DataFrame) -> pd.DataFrame:
     figure or the median of its same-run reference row.
     """
     import pandas as pd
-    from bench import tables as tb
+    from bench.reporting import tables as tb
 
     medians = {str(r["method"]): r for r in frame.to_dict("records")}
     out = []
@@ -243,7 +243,7 @@ def judge(frame: pd.DataFrame) -> pd.DataFrame:
 
 def verdict_lines(frame: pd.DataFrame) -> list[str]:
     """One line per target row: the figure, the limit, met / missed with the ratio, and the reference."""
-    from bench import tables as tb
+    from bench.reporting import tables as tb
 
     lines = []
     for row in frame.to_dict("records"):
@@ -265,7 +265,7 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
     """One row per method and per same-run reference: ms on the 256-plane and (spike methods) 41-plane
     windows, per step, threads, load, and the verdict of the method's target."""
     import pandas as pd
-    from bench import timer
+    from bench.harness import timer
 
     created = timer.create_methods(names, weights_dir=weights_dir, device=device)
     needs = {m for method, _ in created.values() if method is not None for m in method.inputs}
@@ -319,7 +319,7 @@ def measure(names: Sequence[str], *, repeats: int, warmup: int, weights_dir=None
 def markdown(frame: pd.DataFrame, repeats: int, warmup: int, machine: str) -> str:
     """The benchmark's table: median [min-max] ms per frame beside the references, targets and verdicts."""
     import pandas as pd
-    from bench import tables as tb
+    from bench.reporting import tables as tb
 
     rows = []
     methods = frame[~frame["method"].astype(str).str.startswith("ref:")]
@@ -368,9 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from bench import tables as tb
-    from bench import timer
-    from bench.provenance import machine
+    from bench.reporting import tables as tb
+    from bench.harness import timer
+    from bench.harness.provenance import machine
     from neuspike.utils.atomic import write_text
     from neuspike.methods.weights import weights_dir_from_env
 

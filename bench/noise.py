@@ -13,7 +13,7 @@ import argparse
 import sys
 from typing import Sequence
 
-from bench import grid as grids
+from bench.harness import grid as grids
 from bench.sweep import COMMON_EPILOG, add_common_arguments, run_command, spec_from_args
 
 LEVELS = grids.PAPER_NOISE_LEVELS

@@ -3,7 +3,7 @@
 The catalogue below (:data:`CATALOGUE`) is the one list of what ``reports/`` holds: each folder, what
 it is, the command that made its results, and how it is rebuilt from them. Without ``--rerun``
 nothing is simulated and no method runs: each sweep folder's tables (and, not committed, its figures
-and PDF) are rebuilt from its ``results.csv.gz`` by :func:`bench.reporting.build_report`; then the
+and PDF) are rebuilt from its ``results.csv.gz`` by :func:`bench.reporting.build.build_report`; then the
 derived pages, in order: ``summary/`` (the light, motion and noise sweeps together), Table 2's
 accuracy-versus-time join in ``timing/``, ``margins.md``, and the model cards beside the shipped
 weights (``neuspike/trained/<network>.md``). The tables come out byte for byte as committed when the
@@ -119,7 +119,7 @@ def _say(message: str) -> None:
 
 def rebuild_sweep(folder: Path) -> None:
     """Tables (and the uncommitted figures and PDF) of one results folder, from its files alone."""
-    from bench.reporting import build_report
+    from bench.reporting.build import build_report
 
     build_report(folder)
 
@@ -129,7 +129,7 @@ def rebuild_summary(reports: Path) -> None:
     the accuracy-versus-time figure are what is committed."""
     import pandas as pd
 
-    from bench.reporting import build_report, results_file
+    from bench.reporting.build import build_report, results_file
 
     with tempfile.TemporaryDirectory(prefix="summary-") as tmp:
         work = Path(tmp)
@@ -152,14 +152,14 @@ def rebuild_timing(folder: Path, reports: Path) -> None:
     """Table 2's report; for the CPU table, its accuracy join with the light sweep first."""
     import pandas as pd
 
-    from bench import tables as tb
-    from bench.reporting import build_report, read_results
-    from bench.timer import join_accuracy
+    from bench.reporting import tables as tb
+    from bench.reporting.build import build_report, read_results
+    from bench.reporting.accuracy import join_accuracy
     from neuspike.utils.atomic import write_text
 
     if folder.name == "timing":
         light = reports / "light"
-        from bench.reporting import results_file
+        from bench.reporting.build import results_file
 
         joined = join_accuracy(read_results(results_file(light)), pd.read_csv(folder / "timing.csv"), "reports/light")
         write_text(folder / "accuracy_vs_time.csv", tb.to_csv_text(joined))
@@ -167,7 +167,7 @@ def rebuild_timing(folder: Path, reports: Path) -> None:
 
 
 def rebuild_margins(reports: Path) -> None:
-    from bench.margins import margins_markdown
+    from bench.reporting.margins import margins_markdown
     from neuspike.utils.atomic import write_text
 
     folders = [reports / name for name in MARGIN_SWEEPS]
@@ -177,7 +177,7 @@ def rebuild_margins(reports: Path) -> None:
 
 
 def rebuild_cards(reports: Path) -> None:
-    from bench.cards import write_cards
+    from bench.reporting.cards import write_cards
 
     write_cards(root=reports.parent)
 

@@ -1,6 +1,6 @@
 """Figures, tables and a PDF from a results folder alone: ``python -m bench.report RESULTS_DIR``.
 
-The command of :mod:`bench.reporting` (what it reads and writes is described there); nothing heavy is
+The command of :mod:`bench.reporting.build` (what it reads and writes is described there); nothing heavy is
 imported before the arguments are parsed.
 """
 
@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from bench.reporting import build_report
+    from bench.reporting.build import build_report
 
     try:
         pdf = build_report(Path(args.results_dir), Path(args.out) if args.out else None, spread=args.spread)

@@ -190,7 +190,7 @@ def numpy_reference_paths() -> Iterator[None]:
 
 def window_cases(sizes=WINDOW_SIZES) -> list[Case]:
     """One simulated window of the sweep's default cell per run, compiled and on the reference paths."""
-    from bench.grid import DEFAULT_EFFECTS
+    from bench.harness.grid import DEFAULT_EFFECTS
     from neuspike.conditions import Condition
     from neuspike.simulation.cell import simulate_sample
     from neuspike.simulation.recording import SensorConfig

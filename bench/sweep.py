@@ -1,7 +1,7 @@
 """Sweeps over light, motion, noise, and light and noise together: ``python -m bench.sweep``.
 
-The command: it parses its options into a :class:`bench.harness.SweepSpec` and an
-:class:`bench.harness.Execution` and runs :func:`bench.harness.run_sweep` (outputs, resuming and exit
+The command: it parses its options into a :class:`bench.harness.runner.SweepSpec` and an
+:class:`bench.harness.runner.Execution` and runs :func:`bench.harness.runner.run_sweep` (outputs, resuming and exit
 status are described there). :mod:`bench.noise` shares its options. Only light modules are imported
 before the arguments are parsed, so ``--help`` and usage errors answer at once.
 """
@@ -13,14 +13,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
-from bench import grid as grids
-from bench.executors import EXECUTORS
+from bench.harness import grid as grids
+from bench.harness.executors import EXECUTORS
 from neuspike.conditions import parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 if TYPE_CHECKING:
-    from bench.harness import Execution, SweepSpec
+    from bench.harness.runner import Execution, SweepSpec
 
 
 COMMON_EPILOG = """\
@@ -110,7 +110,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
 def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
     """The requested method names (``--methods``, else every registered one), plug-ins loaded and each
     name checked against the registry."""
-    from bench.cells import load_plugins, plugin_names
+    from bench.harness.cells import load_plugins, plugin_names
     from neuspike import methods as registry
 
     load_plugins(plugin_names(tuple(args.plugin)))
@@ -129,7 +129,7 @@ def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Sequence[str] | None = None) -> SweepSpec:
     """Build the :class:`SweepSpec` of a command line."""
-    from bench.harness import SweepSpec
+    from bench.harness.runner import SweepSpec
     from neuspike.simulation.recording import SensorConfig
     from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
@@ -160,11 +160,11 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
 
 
 def execution_from_args(args: argparse.Namespace) -> Execution:
-    from bench.harness import Execution
+    from bench.harness.runner import Execution
 
     cache = args.cache
     if args.scheduler is not None:  # refused before anything is announced or created
-        from bench.executors import check_scheduler_address
+        from bench.harness.executors import check_scheduler_address
 
         check_scheduler_address(args.scheduler)
     return Execution(
@@ -183,7 +183,7 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
         spec = spec_builder(args)
         execution = execution_from_args(args)
         out = Path(args.out or default_out)
-        from bench.harness import run_sweep
+        from bench.harness.runner import run_sweep
         from neuspike import methods as registry
         from neuspike.formats.staging import check_writable_folder
 
@@ -195,6 +195,10 @@ def run_command(spec_builder, args: argparse.Namespace, default_out: str) -> int
         print(f"{spec.name} sweep: {len(spec.grid.cells())} cells x {len(spec.methods)} methods -> {out}",
               file=sys.stderr)
         outcome = run_sweep(spec, out, execution)
+        if execution.report:
+            from bench.reporting.build import report_after_run
+
+            report_after_run(outcome)
     except KeyboardInterrupt:
         print("interrupted: finished cells are saved; rerun the same command to resume", file=sys.stderr)
         return 130

@@ -18,7 +18,7 @@ Two honest costs for methods that continue a video from their previous frame (th
 ``reconstruct_next``: the recurrent ones carry their state, NeuSpike-Net slides its
 representations): ``cold_ms``, one whole call (the cold start: a recurrent method's warm-up over the
 event history included), and ``stream_ms``, one new frame of a running video at
-:data:`bench.timer.STREAM_FPS` (1,000) frames per second of sensor time, timed on consecutive frames
+:data:`bench.harness.timer.STREAM_FPS` (1,000) frames per second of sensor time, timed on consecutive frames
 of the representative scene simulated as one continuous recording (``stream_steps``: network steps
 per new frame). Table 2 lists both, labelled, and the accuracy-versus-time chart draws such a method
 twice: filled at its cold start, hollow at its streaming cost.
@@ -31,7 +31,7 @@ Outputs in ``--out`` (default ``runs/timing``; ``runs/timing-full`` with ``--ful
     ``config.json``, ``metadata.json``; with sweep results (``--results``): ``accuracy_vs_time.csv``
     (each method's mean PSNR and SSIM from the sweep beside its ms per frame here, at the sweep's
     resolution when it was timed, else at the timed resolution closest in pixel count) and
-    ``figures/accuracy_vs_time.png``; and ``report.pdf`` (:func:`bench.reporting.build_report`).
+    ``figures/accuracy_vs_time.png``; and ``report.pdf`` (:func:`bench.reporting.build.build_report`).
 
 ``--results`` defaults to the newest (by the time ``results.csv`` was written) of ``runs/light``,
 ``runs/light-full``, ``runs/motion``, ``runs/motion-full``, ``runs/noise``, ``runs/noise-full``
@@ -51,7 +51,7 @@ import time
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from bench import grid as grids
+from bench.harness import grid as grids
 from neuspike.errors import InputError
 from neuspike.methods.precision import PRECISIONS
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
@@ -71,7 +71,7 @@ def _sizes_text(sizes: Iterable[tuple[int, int]]) -> str:
 
 def newest_results(candidates: Sequence[str | os.PathLike] = DEFAULT_RESULTS) -> Path | None:
     """The candidate folder whose ``results.csv`` was written last, or ``None``."""
-    from bench.reporting import results_file
+    from bench.reporting.build import results_file
 
     paths = [Path(c) for c in candidates if results_file(c).is_file()]
     if not paths:
@@ -81,7 +81,7 @@ def newest_results(candidates: Sequence[str | os.PathLike] = DEFAULT_RESULTS) ->
 
 def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
     """``"240x180,400x250"`` -> ``((240, 180), (400, 250))``."""
-    from bench.grid import parse_list, parse_size
+    from bench.harness.grid import parse_list, parse_size
 
     return tuple(parse_list(text, parse_size))
 
@@ -139,15 +139,16 @@ def run(args: argparse.Namespace) -> Path:
     """Run a parsed ``bench.timing`` command; return the output folder."""
     import torch
 
-    from bench import tables as tb
-    from bench.timer import LIGHT, MOTION, PLANES, check_count, join_accuracy, measure, method_names, sweep_resolution
+    from bench.reporting import tables as tb
+    from bench.harness.timer import LIGHT, MOTION, PLANES, check_count, measure, method_names
+    from bench.reporting.accuracy import join_accuracy, sweep_resolution
     from neuspike.utils.parallel import set_threads
     from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
     from neuspike.utils.atomic import write_json, write_text
-    from bench.provenance import LoadWatch, command_line, machine, now_iso, package_versions, source_state
+    from bench.harness.provenance import LoadWatch, command_line, machine, now_iso, package_versions, source_state
     from neuspike.utils.jsonio import portable_path
-    from bench.reporting import write_timing_tables
+    from bench.reporting.build import write_timing_tables
 
     weights = weights_dir_from_env(args.weights)
     if weights is not None and not weights.is_dir():
@@ -177,7 +178,7 @@ def run(args: argparse.Namespace) -> Path:
     results_dir = None if (args.results or "").lower() == "none" else (Path(args.results) if args.results else newest_results())
     results = None
     if results_dir is not None:
-        from bench.reporting import read_results, results_file
+        from bench.reporting.build import read_results, results_file
 
         if not results_file(results_dir).is_file():
             raise InputError(f"--results: {results_dir} holds no results.csv (or results.csv.gz)")
@@ -219,7 +220,7 @@ def run(args: argparse.Namespace) -> Path:
     elif acc_path.exists():
         acc_path.unlink()  # a chart from an earlier run would not match these timings
     if not args.no_report:
-        from bench.reporting import build_report
+        from bench.reporting.build import build_report
 
         print(f"report: {build_report(out)}")
     return out

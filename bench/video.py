@@ -256,7 +256,7 @@ def run(spec: VideoBenchSpec, out: Path, *, cache: Path | None = None, weights_d
     import pandas as pd
     import torch
 
-    from bench.provenance import LoadWatch, collect, finish, now_iso
+    from bench.harness.provenance import LoadWatch, collect, finish, now_iso
     from neuspike.utils.atomic import write_text
     from neuspike.methods import available
     from neuspike.video import frame_times, open_recording
@@ -330,7 +330,7 @@ def _load_average() -> list[float] | None:
 
 
 def _contention_sentence(run_meta: dict[str, Any]) -> str:
-    """What the page says about other jobs' load (:class:`bench.provenance.LoadWatch`'s verdict)."""
+    """What the page says about other jobs' load (:class:`bench.harness.provenance.LoadWatch`'s verdict)."""
     contended = run_meta.get("timing_contended")
     if contended:
         return " **Timings contended**: " + "; ".join(run_meta.get("contention", [])) + ", so frames/s is lower than quiet."

@@ -85,3 +85,18 @@ def test_imports_have_no_cycle():
         if node not in state:
             visit(node)
     assert not cycles, cycles
+
+
+def test_bench_has_two_wings_and_its_top_level_holds_commands_only():
+    """``bench/*.py`` are the commands users type (each has ``main``); the libraries live in
+    ``bench.harness`` and ``bench.reporting``, and no harness module imports the reporting wing."""
+    modules = _modules()
+    bad = [f"{name} imports {target}" for name, path in modules.items() if name.startswith("bench.harness")
+           for target in _imports(path, modules) if target.startswith("bench.reporting")]
+    assert not bad, bad
+    for path in (ROOT / "bench").glob("*.py"):
+        if path.stem == "__init__":
+            continue
+        tree = ast.parse(path.read_text())
+        assert any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body), \
+            f"bench/{path.name} is not a command (no main): libraries go into bench/harness or bench/reporting"

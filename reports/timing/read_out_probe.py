@@ -2,7 +2,7 @@
 
     python reports/timing/read_out_probe.py [--method e2vid] [--frames 24] [--threads 1] [--photo astronaut]
 
-A running video like the timing command's (:func:`bench.timer.running_video`: a pan at the
+A running video like the timing command's (:func:`bench.harness.timer.running_video`: a pan at the
 representative condition, L = 1/4, S = 128, 1,000 frames/s of sensor time, 400x250) but of a
 *training* photograph, so that the choice between the read-outs is never made on a test photograph.
 The first frame warms up from a reset (the same for both read-outs); every later frame streams
@@ -25,8 +25,8 @@ import numpy as np
 
 def running_video_of(photo: str, width: int, height: int, frames: int, fps: float):
     """``(samples, ground truth)`` of a pan of ``photo`` streamed at ``fps`` (the timing video's recipe)."""
-    from bench import grid as grids
-    from bench.timer import LIGHT, MOTION, PLANES
+    from bench.harness import grid as grids
+    from bench.harness.timer import LIGHT, MOTION, PLANES
     from neuspike.conditions import Condition
     from neuspike.scenes import make_scene
     from neuspike.simulation.recording import SensorConfig
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--size", default="400x250", help="WxH (default 400x250)")
     p.add_argument("--weights", default="../shared/weights", help="published weights (for firenet)")
     args = p.parse_args(argv)
-    from bench.timer import STREAM_FPS, set_threads
+    from bench.harness.timer import STREAM_FPS, set_threads
     from neuspike.methods import create
     from neuspike.scenes.photos import TEST_PHOTOS
     from neuspike.video.truth import score_frame

@@ -2,7 +2,7 @@
 
     python reports/timing/stream_probe.py [THREADS] [WxH]      # default: 1 thread, 400x250
 
-On the timing command's running video (:func:`bench.timer.running_video`, 1,000 frames/s of sensor
+On the timing command's running video (:func:`bench.harness.timer.running_video`, 1,000 frames/s of sensor
 time), prints the times of back-to-back network steps on one frame's voxel grids, then for each
 streamed frame (``reconstruct_next``) its total, each network step inside it and the time outside the
 steps (event slicing, voxel grids, the read-out), and a profile of one frame. float32.
@@ -16,7 +16,7 @@ import pstats
 import sys
 import time
 
-from bench.timer import running_video, set_threads
+from bench.harness.timer import running_video, set_threads
 from neuspike.methods import create
 
 

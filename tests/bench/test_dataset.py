@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 
 from bench import dataset as cmd
-from bench import manifest as mf
-from bench.results import read_csv
+from bench.harness import manifest as mf
+from bench.harness.results import read_csv
 from neuspike.conditions import Condition
 from neuspike.formats.images import write_png
 from neuspike.formats.spike_npz import write_spike_npz
@@ -195,7 +195,7 @@ def test_report_has_protocol_table_and_sheets(spike_gt, tmp_path):
     table = pd.read_csv(out / "tables" / "dataset.csv")
     assert set(table["recording"]) == {"still", "pan"} and set(table["method"]) == {"tfp", "tfi"}
     assert (out / "figures" / "sheet_still.png").is_file() and (out / "report.pdf").stat().st_size > 0
-    from bench.dataset_report import protocol_blocks
+    from bench.reporting.dataset_report import protocol_blocks
 
     text = " ".join(t for _, t in protocol_blocks(json.loads((out / "config.json").read_text())["dataset"]))
     assert "sigma=1.5" in text and "Data range: 1.0" in text

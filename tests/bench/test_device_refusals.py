@@ -8,11 +8,11 @@ import pytest
 import torch
 
 from bench import dataset, fast_motion, noise, sweep, timing
-from bench import grid as grids
+from bench.harness import grid as grids
 from bench import video as video_bench
-from bench.datasets import DatasetSpec, run_dataset
-from bench.harness import Execution, SweepSpec, run_sweep
-from bench.manifest import infer_manifest
+from bench.harness.datasets import DatasetSpec, run_dataset
+from bench.harness.runner import Execution, SweepSpec, run_sweep
+from bench.harness.manifest import infer_manifest
 from neuspike import reconstruct
 from neuspike.errors import InputError
 from neuspike.formats.spike_npz import write_spike_npz

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.executors import PARENT_CHECK_S
+from bench.harness.executors import PARENT_CHECK_S
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -26,7 +26,7 @@ SCRIPT = textwrap.dedent('''
         return os.getpid()
 
     if __name__ == "__main__":
-        from bench.executors import LocalExecutor
+        from bench.harness.executors import LocalExecutor
         with LocalExecutor(2) as ex:
             for _ in ex.run(task, [sys.argv[1]] * 2):
                 pass
@@ -72,7 +72,7 @@ def test_workers_exit_when_the_main_process_is_killed(tmp_path):
 
 
 def test_a_scheduler_address_that_is_not_one_is_refused_in_one_line_before_any_work(tmp_path, capsys):
-    from bench.executors import check_scheduler_address
+    from bench.harness.executors import check_scheduler_address
     from bench.sweep import main
     from neuspike.errors import InputError
 

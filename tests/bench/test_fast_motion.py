@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from bench import fast_motion
-from bench.grid import PAN_SPEED_PX_S_AT_400, scene_entry
+from bench.harness.grid import PAN_SPEED_PX_S_AT_400, scene_entry
 from neuspike.errors import InputError
 
 

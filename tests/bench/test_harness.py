@@ -15,11 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import grid as grids
+from bench.harness import grid as grids
 from neuspike.simulation.cache import load_recording, save_recording
-from bench.cells import METRICS, forget_plugin, load_plugins
-from bench.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
-from bench.harness import ConfigMismatch, Execution, SweepSpec, run_sweep
+from bench.harness.cells import METRICS, forget_plugin, load_plugins
+from bench.harness.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
+from bench.harness.runner import ConfigMismatch, Execution, SweepSpec, run_sweep
 from bench.sweep import main
 from neuspike import methods as registry
 from neuspike.errors import InputError
@@ -311,8 +311,8 @@ def test_cache_round_trip_is_bit_exact(tmp_path):
 
 DRIVER = textwrap.dedent('''
     import sys
-    from bench import grid as grids
-    from bench.harness import Execution, SweepSpec, run_sweep
+    from bench.harness import grid as grids
+    from bench.harness.runner import Execution, SweepSpec, run_sweep
     from neuspike.simulation.recording import SensorConfig
 
     plugin, out = sys.argv[1], sys.argv[2]
@@ -359,7 +359,7 @@ def test_kill_midway_then_rerun_equals_an_uninterrupted_run(plugin, tmp_path):
 
 def test_dask_gives_the_local_results(plugin, tmp_path):
     pytest.importorskip("distributed")
-    from bench.executors import DaskExecutor
+    from bench.harness.executors import DaskExecutor
 
     spec = tiny_spec(["ht-mean", "ht-fail"])
     local = run_sweep(spec, tmp_path / "local", quiet(plugin))
@@ -383,7 +383,7 @@ def test_worker_processes_give_the_in_process_results(plugin, tmp_path):
 
 
 def test_dask_missing_gives_a_clear_error(monkeypatch):
-    from bench.executors import DaskExecutor
+    from bench.harness.executors import DaskExecutor
 
     monkeypatch.setitem(sys.modules, "distributed", None)  # as if the extra were not installed
     with pytest.raises(InputError, match=r"neuspike-bench\[dask\]"):
@@ -392,7 +392,7 @@ def test_dask_missing_gives_a_clear_error(monkeypatch):
 
 
 def test_reconstructions_of_the_swept_axis_are_saved_for_the_report(plugin, tmp_path):
-    report = pytest.importorskip("bench.reporting")
+    from bench.harness import images as report
     import matplotlib.image as mpimg
 
     spec = SweepSpec(name="tiny", grid=tiny_grid(seeds=(0, 1)), methods=("ht-mean", "ht-fail"),
@@ -469,7 +469,7 @@ def test_merged_sweeps_equal_one_sweep_of_all_methods(plugin, tmp_path):
 def test_merge_with_replace_takes_a_methods_rows_from_the_last_folder_that_holds_it(plugin, tmp_path):
     """A method retrained and rerun alone replaces its old rows (and keeps its place in the method list)."""
     from bench.merge import main as merge_main, merge_sweeps
-    from bench.results import to_csv_text
+    from bench.harness.results import to_csv_text
 
     import dataclasses
 
@@ -504,7 +504,7 @@ def test_merge_take_reads_only_the_named_methods_from_later_folders(plugin, tmp_
     """``--take``: a rerun that also computed another method rejoins only the named one; the other
     keeps the first folder's rows and place, and a method no later folder holds is refused by name."""
     from bench.merge import main as merge_main, merge_sweeps
-    from bench.results import to_csv_text
+    from bench.harness.results import to_csv_text
 
     import dataclasses
 
@@ -534,7 +534,7 @@ def test_progress_on_a_log_file_is_a_plain_line_now_and_then():
     """No terminal, no bar: a line at most every N seconds and one at the end, with the time left."""
     import io
 
-    from bench.harness import ProgressLines
+    from bench.harness.runner import ProgressLines
 
     stream = io.StringIO()
     lines = ProgressLines("light", 10, 2, every_s=3600.0, stream=stream)
@@ -574,7 +574,7 @@ def test_merge_refuses_damaged_or_doubled_results_and_a_file_as_out_in_one_line(
 
 def test_a_second_run_on_the_same_out_is_refused_while_the_first_writes(plugin, tmp_path):
     """The folder is locked for the run (the kernel's flock, released when the process ends)."""
-    from bench.harness import out_lock
+    from bench.harness.runner import out_lock
 
     out = tmp_path / "run"
     with out_lock(out):

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench import grid as grids
-from bench.cells import WorkerSetup
-from bench.results import read_csv
-from bench.harness import Execution, SweepSpec, resolve_methods, run_sweep
+from bench.harness import grid as grids
+from bench.harness.cells import WorkerSetup
+from bench.harness.results import read_csv
+from bench.harness.runner import Execution, SweepSpec, resolve_methods, run_sweep
 from neuspike import methods as registry
 from neuspike.methods import Method, MethodUnavailable
 from neuspike.simulation.recording import SensorConfig

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.provenance import command_line
+from bench.harness.provenance import command_line
 from neuspike.utils.jsonio import portable_path
 
 
@@ -24,7 +24,7 @@ def test_paths_inside_or_beside_the_current_folder_become_relative(tmp_path, mon
 
 def test_the_command_names_the_module_and_no_absolute_path(tmp_path):
     # run as `python -m` from another folder, with absolute paths as arguments
-    code = ("import json, sys; from bench.provenance import command_line; print(json.dumps(command_line()))")
+    code = ("import json, sys; from bench.harness.provenance import command_line; print(json.dumps(command_line()))")
     module = tmp_path / "probe_cmd.py"
     module.write_text(code)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[2]), str(tmp_path)])}
@@ -46,8 +46,8 @@ def test_a_script_run_by_path_is_named_without_its_folder(monkeypatch):
 
 
 def test_a_sweeps_config_names_its_weights_folder_without_the_machines_path(tmp_path, monkeypatch):
-    from bench import grid as grids
-    from bench.harness import SweepSpec
+    from bench.harness import grid as grids
+    from bench.harness.runner import SweepSpec
 
     (tmp_path / "repo").mkdir()
     (tmp_path / "shared" / "weights").mkdir(parents=True)
@@ -59,7 +59,7 @@ def test_a_sweeps_config_names_its_weights_folder_without_the_machines_path(tmp_
 
 
 def test_other_jobs_load_marks_timings_as_contended(monkeypatch):
-    from bench import provenance
+    from bench.harness import provenance
 
     loads = iter([0.1, 1.2, 1.3, 2.9])  # before; then this run's one thread, then another job joins
     monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(loads), 0.0, 0.0))
@@ -84,8 +84,8 @@ def test_other_jobs_load_marks_timings_as_contended(monkeypatch):
 def test_workers_times_threads_beyond_the_cpus_is_refused(tmp_path):
     import pytest
 
-    from bench import grid as grids
-    from bench.harness import Execution, SweepSpec, run_sweep
+    from bench.harness import grid as grids
+    from bench.harness.runner import Execution, SweepSpec, run_sweep
     from neuspike.utils.resources import usable_cpus
     from neuspike.errors import InputError
 
@@ -99,8 +99,8 @@ def test_workers_times_threads_beyond_the_cpus_is_refused(tmp_path):
 def test_more_workers_than_cpus_is_refused_with_the_default_threads(tmp_path):
     import pytest
 
-    from bench import grid as grids
-    from bench.harness import Execution, SweepSpec, run_sweep
+    from bench.harness import grid as grids
+    from bench.harness.runner import Execution, SweepSpec, run_sweep
     from neuspike.errors import InputError
     from neuspike.utils.resources import usable_cpus
 
@@ -114,7 +114,7 @@ def test_more_workers_than_cpus_is_refused_with_the_default_threads(tmp_path):
 def test_a_job_running_at_the_start_marks_timings_contended_before_the_load_average_sees_it(monkeypatch):
     """The load average lags by about a minute: a job started just before the run reads as quiet
     there, but the runnable tasks counted at the start see it."""
-    from bench import provenance
+    from bench.harness import provenance
 
     monkeypatch.setattr(provenance.os, "getloadavg", lambda: (0.0, 0.0, 0.0))
     monkeypatch.setattr(provenance, "others_busy_cpus", lambda: 2)
@@ -130,7 +130,7 @@ def test_a_job_that_just_ended_does_not_mark_a_quiet_run_contended(monkeypatch):
     with no runnable task at the start and the readings within the run's own threads, the run is quiet
     (the reading before is still recorded). Where something runs at the start, or the system does not
     say, the reading before counts."""
-    from bench import provenance
+    from bench.harness import provenance
 
     decaying = iter([1.29, 1.4, 1.9, 1.45])  # the previous 2-thread benchmark's tail, then this run's 2 threads
     monkeypatch.setattr(provenance.os, "getloadavg", lambda: (next(decaying), 0.0, 0.0))

@@ -11,11 +11,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import claims as cl
-from bench import figures as figs
-from bench import report, reporting
-from bench import tables as tb
-from bench.results import base_row, rows_frame, to_csv_text
+from bench.reporting import claims as cl
+from bench.reporting import figures as figs
+from bench import report
+from bench.harness import images as layout
+from bench.reporting import build as reporting
+from bench.reporting import tables as tb
+from bench.harness.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
 from neuspike.utils.jsonio import canonical_json
 
@@ -91,9 +93,9 @@ def built(tmp_path_factory):
     (d / "metadata.json").write_text('{"source": {"commit": "abc", "dirty": false}, "machine": {"cpu_model": "x"}}\n')
     truth = np.random.default_rng(0).random((24, 40))
     for light in LIGHTS:
-        reporting.write_image_png(reporting.image_path(d / "images", "pan:camera", "light", light, "gt"), truth)
+        layout.write_image_png(layout.image_path(d / "images", "pan:camera", "light", light, "gt"), truth)
         for method in ("tfp-w8", "tfi"):
-            reporting.write_image_png(reporting.image_path(d / "images", "pan:camera", "light", light, method),
+            layout.write_image_png(layout.image_path(d / "images", "pan:camera", "light", light, method),
                                    truth * light * 2)
     return d, reporting.build_report(d), truth
 
@@ -195,14 +197,14 @@ def test_noise_table_puts_the_paper_beside_ours():
 def test_image_convention_round_trip(built):
     d, _, truth = built
     images = d / "images"
-    path = reporting.image_path(images, "pan:camera", "light", 1 / 32, "tfi")
+    path = layout.image_path(images, "pan:camera", "light", 1 / 32, "tfi")
     assert path == images / "pan_camera" / "light=0.03125" / "tfi.png"
     loaded = reporting.load_images(images, synthetic_results(), "light")
     assert set(loaded) == {"pan:camera"}
     np.testing.assert_allclose(loaded["pan:camera"][("gt", 1 / 32)], np.round(truth * 255) / 255, atol=1e-6)
     np.testing.assert_allclose(loaded["pan:camera"][("tfi", 0.5)], np.round(truth * 255) / 255, atol=1e-6)
     with pytest.raises(ValueError):
-        reporting.write_image_png(d / "bad.png", truth + 1.0)  # out of range is refused, never clipped
+        layout.write_image_png(d / "bad.png", truth + 1.0)  # out of range is refused, never clipped
     assert not (d / "bad.png").exists()
 
 
@@ -441,7 +443,7 @@ def test_a_light_noise_grid_gets_the_light_axis_at_each_noise_level(tmp_path):
 
 
 def test_the_light_noise_preset_spans_five_lights_at_four_noise_levels():
-    from bench import grid as grids
+    from bench.harness import grid as grids
 
     g = grids.preset("light-noise", full=True)
     assert g.lights == grids.PAPER_LIGHTS and g.motions == (128,)

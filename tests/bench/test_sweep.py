@@ -39,7 +39,7 @@ def test_an_unwritable_out_is_one_line_before_any_work(tmp_path, capsys):
 
 def test_sweeps_take_a_precision_for_every_learned_method(tmp_path):
     """``--precision`` reaches every worker's method creation; an unknown one is a usage error."""
-    from bench.cells import WorkerSetup, instances
+    from bench.harness.cells import WorkerSetup, instances
     from bench.sweep import build_parser, execution_from_args
 
     args = build_parser().parse_args(["--precision", "float32", "--out", str(tmp_path)])

@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from bench import cells
-from bench import grid as grids
-from bench.results import read_csv
-from bench.harness import ConfigMismatch, Execution, SweepSpec, cell_id, resolve_methods, run_sweep
+from bench.harness import cells
+from bench.harness import grid as grids
+from bench.harness.results import read_csv
+from bench.harness.runner import ConfigMismatch, Execution, SweepSpec, cell_id, resolve_methods, run_sweep
 from bench.sweep import main
-from bench.cells import WorkerSetup
+from bench.harness.cells import WorkerSetup
 from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable, create_many

@@ -11,9 +11,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bench import method_speed, timer, timing
-from bench import tables as tb
-from bench.results import base_row, rows_frame, to_csv_text
+from bench import method_speed, timing
+from bench.harness import timer
+from bench.reporting import accuracy
+from bench.reporting import tables as tb
+from bench.harness.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable
@@ -185,7 +187,7 @@ def test_join_accuracy_takes_the_sweeps_resolution_or_the_closest():
         {"method": "b", "resolution": "640x480", "width": 640, "height": 480, "status": "ok", "ms_per_frame": 30.0},
         {"method": "c", "resolution": "32x24", "width": 32, "height": 24, "status": "skipped", "ms_per_frame": math.nan},
     ])
-    joined = timer.join_accuracy(results_for({"a": 20.0, "b": 25.0, "c": 10.0}), timing_rows, "runs/x").set_index("method")
+    joined = accuracy.join_accuracy(results_for({"a": 20.0, "b": 25.0, "c": 10.0}), timing_rows, "runs/x").set_index("method")
     assert joined.loc["a", "ms_per_frame"] == 1.0 and joined.loc["a", "resolution"] == "32x24"
     assert joined.loc["b", "ms_per_frame"] == 3.0 and joined.loc["b", "resolution"] == "240x180"
     assert math.isnan(joined.loc["c", "ms_per_frame"]) and joined.loc["b", "psnr"] == 25.0
@@ -205,7 +207,7 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
     acc = pd.read_csv(out / "accuracy_vs_time.csv")
     assert acc["method"].tolist() == ["tt-mean"] and acc["psnr"].iloc[0] == 20.0
     # times are paired with accuracy at the sweep's own resolution, timed in addition to --sizes
-    sweep_w, sweep_h = timer.sweep_resolution(results_for({"tt-mean": 20.0}))
+    sweep_w, sweep_h = accuracy.sweep_resolution(results_for({"tt-mean": 20.0}))
     assert acc["resolution"].iloc[0] == f"{sweep_w}x{sweep_h}"
     assert {"32x24", f"{sweep_w}x{sweep_h}"} <= set(frame["resolution"])
     meta = json.loads((out / "metadata.json").read_text())
@@ -215,7 +217,7 @@ def test_timing_command_writes_table_2_chart_and_report(test_methods, tmp_path):
         assert (out / name).stat().st_size > 0
     # the report rebuilds Table 2 from timing.csv alone, byte for byte
     before = {n: (out / "tables" / n).read_bytes() for n in ("timing.md", "timing.csv", "accuracy_vs_time.md")}
-    from bench.reporting import build_report
+    from bench.reporting.build import build_report
 
     build_report(out)
     assert {n: (out / "tables" / n).read_bytes() for n in before} == before
@@ -329,11 +331,11 @@ def test_table_2_and_the_chart_label_the_cold_start_and_the_streaming_cost():
     frame = pd.DataFrame([row], columns=list(timer.TIMING_COLUMNS))
     md = tb.timing_markdown(frame)
     assert "**cold start**" in md and "| e2vid | 32x24 | 400 (16 steps) | 50 [45-60] (2.0 steps) | 8.0x |" in md
-    joined = timer.join_accuracy(results_for({"e2vid": 12.0}), frame, "runs/x").set_index("method")
+    joined = accuracy.join_accuracy(results_for({"e2vid": 12.0}), frame, "runs/x").set_index("method")
     assert joined.loc["e2vid", "ms_per_frame"] == 400.0 and joined.loc["e2vid", "stream_ms"] == 50.0
     # the chart: the streaming cost drawn hollow at 50 ms beside the filled cold start at 400, and a key
     # below the panels that says which is which
-    from bench import figures
+    from bench.reporting import figures
 
     points = tb.with_fronts(joined.reset_index()[["method", "family", "ms_per_frame", "psnr", "ssim", "stream_ms"]])
     fig = figures.accuracy_time_figure(points, note="a note " * 40)

@@ -82,7 +82,7 @@ def test_a_learned_methods_row_names_the_device_it_ran_on(bench_run):
 def test_other_jobs_load_marks_the_timings_contended(bench_run, tmp_path, monkeypatch):
     """With other jobs' load beyond the run's own threads (a load average read as 3 on a run of 1
     thread) the run is marked contended in its metadata and on its page; a quiet reading is not."""
-    import bench.provenance as provenance
+    import bench.harness.provenance as provenance
 
     argv, _, _ = bench_run
     for load, contended in ((3.0, True), (0.0, False)):

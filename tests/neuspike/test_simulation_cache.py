@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import neuspike.simulation.cell as cell_module
-from bench import grid as grids
-from bench.cells import forget_plugin, load_plugins
-from bench.results import read_csv
-from bench.harness import Execution, SweepSpec, run_sweep
+from bench.harness import grid as grids
+from bench.harness.cells import forget_plugin, load_plugins
+from bench.harness.results import read_csv
+from bench.harness.runner import Execution, SweepSpec, run_sweep
 from neuspike import methods as registry
 from neuspike.conditions import Condition
 from neuspike.scenes import SceneSpec
@@ -125,7 +125,7 @@ def test_an_entry_of_the_earlier_layout_is_still_read(tmp_path, simulations):
     served, simulated = _get(RecordingCache(tmp_path), BOTH)
     assert not simulated and simulations == []
     _assert_same_streams(served, rec)
-    assert served.static_region() is None  # not kept then: the sweep renders it (bench.cells)
+    assert served.static_region() is None  # not kept then: the sweep renders it (bench.harness.cells)
 
 
 def test_a_file_of_the_first_format_without_the_dark_rate_is_simulated_again(tmp_path, simulations):

@@ -93,10 +93,10 @@ def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_
     """With sweep_fraction p, about p of the cells take one of the 12 sweep points (light, S, noise) and pan at
     the sweeps' 1000 px/s; the rest draw from the mixture's ranges. p = 0 keeps an earlier spec's key and
     cell descriptions."""
-    from bench import grid
+    from bench.harness import grid
     from neuspike.train.spec import SWEEP_POINTS, SWEEP_SPEED_PX_S
 
-    # the points of the sweeps' own presets (bench.grid): the light sweep, the motion sweep, the noise test
+    # the points of the sweeps' own presets (bench.harness.grid): the light sweep, the motion sweep, the noise test
     presets = {(l, grid.PAPER_FIXED_MOTION, "none") for l in grid.PAPER_LIGHTS} | \
         {(grid.PAPER_FIXED_LIGHT, m, "none") for m in grid.PAPER_MOTIONS} | \
         {(grid.PAPER_FIXED_LIGHT, grid.PAPER_FIXED_MOTION, n) for n in grid.PAPER_NOISE_LEVELS}
@@ -126,12 +126,12 @@ def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_
 
 
 def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_rest_alone(tmp_path):
-    """sweep_scenes: the sweep cells take the four kinds of bench.grid alike, the zoom and fan with the
-    scenes bench.grid builds (compared field by field with its own SceneSpec), at one of the sweeps'
+    """sweep_scenes: the sweep cells take the four kinds of bench.harness.grid alike, the zoom and fan with the
+    scenes bench.harness.grid builds (compared field by field with its own SceneSpec), at one of the sweeps'
     points; the other cells are those of the same spec without it."""
     from dataclasses import fields
 
-    from bench import grid
+    from bench.harness import grid
     from neuspike.train.spec import SWEEP_POINTS
     from neuspike.train.windows import SWEEP_SCENE_KINDS
 

@@ -4,7 +4,7 @@ Nothing is simulated and no method runs: the report reads only the files of the 
 be rebuilt at any time, on any machine, and gives the same tables byte for byte.
 
 Inputs (in ``RESULTS_DIR``; each optional, at least one of the first two)
-    ``results.csv``            a sweep's long results (:mod:`bench.results`); a committed report may
+    ``results.csv``            a sweep's long results (:mod:`bench.harness.results`); a committed report may
                                keep it gzipped as ``results.csv.gz`` (read when ``results.csv`` is absent)
     ``timing.csv``             Table 2 rows written by :mod:`bench.timing`
     ``accuracy_vs_time.csv``   accuracy-versus-time points joined by :mod:`bench.timing`
@@ -12,7 +12,7 @@ Inputs (in ``RESULTS_DIR``; each optional, at least one of the first two)
     ``images/``                reconstructions for the figure grid (below)
 
 A folder written by ``python -m bench.dataset`` (``config.json`` holds ``dataset``) gets the dataset
-report of :mod:`bench.dataset_report` instead: the protocol first, a table per recording and method,
+report of :mod:`bench.reporting.dataset_report` instead: the protocol first, a table per recording and method,
 and a contact sheet per recording.
 
 Outputs (into ``RESULTS_DIR``, or ``--out``; every file written atomically)
@@ -54,12 +54,11 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from bench import figures as figs
-from bench import tables as tb
+from bench.reporting import figures as figs
+from bench.reporting import tables as tb
 from neuspike.utils.atomic import write_text
-from neuspike.formats.images import write_png
-from bench.results import tfp_windows
-from bench.claims import claims_markdown, evaluate_claims
+from bench.harness.results import tfp_windows
+from bench.reporting.claims import claims_markdown, evaluate_claims
 
 #: Resolution of the reconstruction grids' PNGs (each cell about 220 pixels wide).
 GRID_DPI = 100
@@ -68,37 +67,8 @@ GRID_DPI = 100
 # The image convention
 # ----------------------------------------------------------------------------------------------
 
-safe_name = tb.safe_name
-
-
-def axis_folder(axis: str, value: Any) -> str:
-    """``<axis>=<value>``, the value as ``results.csv`` writes it (``light=0.03125``, ``motion=128``)."""
-    if axis not in tb.AXES:
-        raise ValueError(f"axis: expected one of {tb.AXES}, got {axis!r}")
-    if axis == "light":
-        text = repr(float(value))
-    elif axis == "motion":
-        text = str(int(value))
-    else:
-        text = str(value)
-    return safe_name(f"{axis}={text}")
-
-
-def image_path(images_dir: str | os.PathLike, scene: str, axis: str, value: Any, name: str) -> Path:
-    """Where the reconstruction of ``name`` (a method, or ``"gt"``) of one scene and axis value lives."""
-    return Path(images_dir) / safe_name(scene) / axis_folder(axis, value) / f"{safe_name(name)}.png"
-
-
-def write_image_png(path: str | os.PathLike, image01: np.ndarray) -> Path:
-    """Write a float image in [0, 1] as 8-bit greyscale PNG, atomically.
-
-    Raises
-    ------
-    InputError
-        When the image is not 2-D, not finite, or outside [0, 1] (it is never clipped silently).
-    """
-    return write_png(path, image01, clip=False)
-
+# the layout a run writes its images in (read back here for the figure grid)
+from bench.harness.images import axis_folder, safe_name  # noqa: E402
 
 _read_gray = figs.read_gray
 
@@ -160,8 +130,8 @@ def results_file(folder: str | os.PathLike) -> Path:
 
 
 def read_results(path: Path) -> pd.DataFrame:
-    """``results.csv`` with the harness's dtypes (:func:`bench.results.read_csv`)."""
-    from bench.results import read_csv
+    """``results.csv`` with the harness's dtypes (:func:`bench.harness.results.read_csv`)."""
+    from bench.harness.results import read_csv
 
     return read_csv(path)
 
@@ -356,7 +326,7 @@ def build_report(results_dir: Path, out_dir: Path | None = None, *, spread: str 
         if folder.is_dir():
             remove_stale_temporaries(folder)
     if isinstance(inputs.config.get("dataset"), dict):  # a folder of bench.dataset: its own tables and sheets
-        from bench.dataset_report import build_dataset_report
+        from bench.reporting.dataset_report import build_dataset_report
 
         return build_dataset_report(inputs, out, provenance=title_blocks(replace(inputs, results=None)))
     written: list[Path] = []
@@ -524,3 +494,20 @@ def _timing_pages(t: pd.DataFrame) -> list[Any]:
 
 
 _write_pdf = figs.write_pdf
+
+
+def report_after_run(outcome: Any) -> Any:
+    """Build the report of a finished run (a :class:`bench.harness.runner.SweepOutcome`) into its folder
+    and record the outcome on it (``report_path``, or ``report_note`` and ``report_failed``), as the
+    commands do after ``run_sweep``: a run whose results are empty gets no report, and a report that
+    fails is said in one line (``results.csv`` holds every number)."""
+    from neuspike.errors import one_line
+
+    results = Path(outcome.results_path)
+    if not results.is_file() or results.stat().st_size == 0 or len(pd.read_csv(results, nrows=1)) == 0:
+        return outcome
+    try:
+        outcome.report_path = Path(build_report(Path(outcome.out_dir)))
+    except Exception as exc:
+        outcome.report_note, outcome.report_failed = f"report failed: {one_line(exc)}", True
+    return outcome

@@ -1,10 +1,10 @@
 """Every method on every recording of a dataset (the library behind ``python -m bench.dataset``).
 
-A dataset is a folder of recordings described by a manifest (:mod:`bench.manifest`). Each instant of
-each recording is one task of the harness's loop (:func:`bench.harness.run_tasks`): the same method
-creation (once per worker, :func:`bench.cells.instances`), timing (:func:`bench.cells.run_method`),
+A dataset is a folder of recordings described by a manifest (:mod:`bench.harness.manifest`). Each instant of
+each recording is one task of the harness's loop (:func:`bench.harness.runner.run_tasks`): the same method
+creation (once per worker, :func:`bench.harness.cells.instances`), timing (:func:`bench.harness.cells.run_method`),
 failure-as-a-row, resume and executors as the sweeps, and the same tidy ``results.csv``
-(:mod:`bench.results`; a row per recording, instant, method and metric).
+(:mod:`bench.harness.results`; a row per recording, instant, method and metric).
 
 At each instant
 ---------------
@@ -19,12 +19,12 @@ At each instant
    A ground truth found beside a file but not named by the manifest is not used.
 
 A recording whose files exist but cannot be read gives failed rows (the reader's error) while the
-others run; everything else wrong with a manifest is refused before any work (:func:`bench.manifest.resolve`).
+others run; everything else wrong with a manifest is refused before any work (:func:`bench.harness.manifest.resolve`).
 
 Outputs (``--out``): ``manifest.json`` (the manifest used, inferred or given), ``config.json`` (the
 dataset, the resolved instants and the protocol), ``metadata.json``, ``parts/``, ``errors/``,
 ``results.csv``, ``images/<recording>/<method>.png`` and ``gt.png`` (the recording's middle instant,
-for the contact sheets) and the report (:func:`bench.dataset_report.build_dataset_report`).
+for the contact sheets) and the report (:func:`bench.reporting.dataset_report.build_dataset_report`).
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.cells import WorkerSetup, instances, method_slots, prepare_worker, run_method
-from bench.harness import Execution, SweepOutcome, arithmetic, check_config, prepare_execution, run_tasks
-from bench.manifest import Instant, Manifest, Resolved, resolve, write_manifest, MANIFEST_NAME
-from bench.results import ERROR, OK, base_row
+from bench.harness.cells import WorkerSetup, instances, method_slots, prepare_worker, run_method
+from bench.harness.runner import Execution, SweepOutcome, arithmetic, check_config, prepare_execution, run_tasks
+from bench.harness.manifest import Instant, Manifest, Resolved, resolve, write_manifest, MANIFEST_NAME
+from bench.harness.results import ERROR, OK, base_row
 from neuspike.errors import InputError, one_line
 from neuspike.utils.jsonio import portable_path, stable_hash
 
@@ -67,7 +67,7 @@ class DatasetSpec:
     weights : str or None
         Folder of published weights.
     allow_outside : bool
-        Read files the manifest names outside ``root`` (refused by default: :func:`bench.manifest.resolve`).
+        Read files the manifest names outside ``root`` (refused by default: :func:`bench.harness.manifest.resolve`).
     """
 
     name: str
@@ -211,9 +211,9 @@ def load_instant(r: Resolved, inst: Instant) -> tuple[Any, np.ndarray | None]:
 def run_instant(task: InstantTask) -> Any:
     """Reconstruct one instant with every applicable method and score it (module docstring).
 
-    Returns a :class:`bench.cells.CellResult`; never raises for a method's or a file's failure.
+    Returns a :class:`bench.harness.cells.CellResult`; never raises for a method's or a file's failure.
     """
-    from bench.cells import CellResult
+    from bench.harness.cells import CellResult
     from neuspike.metrics import FULL_REFERENCE_METRICS, NO_REFERENCE_MEASURES, evaluate, no_reference
 
     t_start = time.perf_counter()
@@ -281,11 +281,11 @@ def run_instant(task: InstantTask) -> Any:
 # ----------------------------------------------------------------------------------------------
 
 def _write_images(out: Path, task: InstantTask, images: dict[str, np.ndarray]) -> None:
-    from bench.dataset_report import image_path
+    from bench.harness.images import recording_image_path
     from neuspike.formats.images import write_png
 
     for name, image in images.items():
-        write_png(image_path(out / "images", task.recording.recording.name, name), image, clip=name == "gt")
+        write_png(recording_image_path(out / "images", task.recording.recording.name, name), image, clip=name == "gt")
 
 
 def prepare(spec: DatasetSpec) -> list[Resolved]:

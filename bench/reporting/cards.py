@@ -1,6 +1,6 @@
 """One-page model cards for the networks trained here, from their JSON cards and the committed reports.
 
-    python -m bench.cards              # writes neuspike/trained/<network>.md for every shipped network
+    python -m bench.reporting.cards              # writes neuspike/trained/<network>.md for every shipped network
 
 (``python -m bench.rebuild`` runs it after the reports it reads.)
 
@@ -38,7 +38,7 @@ REPORTS = (
 
 
 def _means(folder: Path) -> pd.DataFrame | None:
-    from bench.reporting import results_file
+    from bench.reporting.build import results_file
 
     path = results_file(folder)
     if not path.is_file():

@@ -34,8 +34,8 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.table import Table  # noqa: E402
 
 from neuspike.utils.atomic import write_with  # noqa: E402
-from bench.results import tfp_windows  # noqa: E402
-from bench.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values, held_conditions,  # noqa: E402
+from bench.harness.results import tfp_windows  # noqa: E402
+from bench.reporting.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values, held_conditions,  # noqa: E402
                           method_families, method_order)
 
 PAGE_SIZE_IN = (11.69, 8.27)  # A4 landscape
@@ -54,7 +54,7 @@ def method_styles(methods: Sequence[str], families: Mapping[str, str],
                   tfp_windows: Mapping[str, float] | None = None) -> dict[str, dict[str, Any]]:
     """Colour, marker, line style and width of every method, stable for a given method list.
 
-    ``tfp_windows`` (:func:`bench.results.tfp_windows`) gives the TFP variants a blue ramp by window.
+    ``tfp_windows`` (:func:`bench.harness.results.tfp_windows`) gives the TFP variants a blue ramp by window.
     """
     styles: dict[str, dict[str, Any]] = {}
     counters: dict[str, int] = {}
@@ -114,7 +114,7 @@ def axis_figure(frame: pd.DataFrame, axis: str, metrics: Sequence[str] = ("psnr"
     Parameters
     ----------
     frame : DataFrame
-        Long results (:mod:`bench.results`).
+        Long results (:mod:`bench.harness.results`).
     axis : {"light", "motion", "noise"}
     metrics : metrics of ``results.csv``, one panel each
     spread : ``"std"`` (mean ± sample standard deviation) or ``"minmax"`` (the range)
@@ -416,7 +416,7 @@ def claims_figures(verdicts: pd.DataFrame) -> list[Figure]:
     blocks: list[tuple[str, str]] = [
         ("p", "Statements of NeuSpike-Net (ICCV 2021) about its Figures 3 and 4 and "
               "Table 3, checked against these results. Numbers are mean PSNR (dB) over scenes and seeds "
-              "unless said otherwise; the thresholds are stated in each test (bench/claims.py)."),
+              "unless said otherwise; the thresholds are stated in each test (bench/reporting/claims.py)."),
     ]
     if verdicts.attrs.get("caveat"):
         blocks.append(("firebrick", verdicts.attrs["caveat"]))

@@ -1,8 +1,8 @@
 """Where cells run: in this process, in local worker processes, or on a Dask cluster.
 
-Every executor runs the same function (:func:`bench.cells.run_cell`) on the same tasks and yields
+Every executor runs the same function (:func:`bench.harness.cells.run_cell`) on the same tasks and yields
 ``(task, result)`` pairs as they complete, where ``result`` is a
-:class:`~bench.cells.CellResult` or, when the infrastructure failed (a worker process died, a Dask
+:class:`~bench.harness.cells.CellResult` or, when the infrastructure failed (a worker process died, a Dask
 worker was lost), the exception. Results never depend on the executor: each cell is a pure function
 of its task. Only the timing columns do, and running cells in parallel on few cores slows each one
 down (the sweep records the executor, the worker count and the threads in ``metadata.json``).

@@ -46,8 +46,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from bench.grid import Cell
-from bench.results import ERROR, OK, SKIPPED, base_row
+from bench.harness.grid import Cell
+from bench.harness.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
 from neuspike.errors import InputError, one_line
 from neuspike.utils.jsonio import canonical_json
@@ -111,7 +111,7 @@ class CellTask:
 class CellResult:
     """What :func:`run_cell` returns.
 
-    ``rows`` are the tidy rows (:mod:`bench.results`); ``status`` is ``"error"`` when any method or
+    ``rows`` are the tidy rows (:mod:`bench.harness.results`); ``status`` is ``"error"`` when any method or
     the simulation failed; ``failures`` maps a method (or ``"simulation"``) to its traceback;
     ``skipped`` maps a method to the reason it could not run; ``cache_hit`` says whether the
     recording came from the cache, all of it; ``simulated`` names the modalities simulated now;

@@ -19,8 +19,8 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
-from bench import grid as grids
-from bench import tables as tb
+from bench.harness import grid as grids
+from bench.harness.results import family_of
 from neuspike.utils.checks import check_int
 from neuspike.conditions import Condition
 from neuspike.errors import InputError, one_line
@@ -391,7 +391,7 @@ def method_info(name: str, method: Any) -> dict[str, Any]:
     precision = str(method.params.get("precision", "")) if learned else ""
     if learned and method.params.get("compiled"):
         precision += ", compiled"
-    return {"family": tb.family_of(ins), "inputs": "+".join(sorted(ins)), "parameters": params,
+    return {"family": family_of(ins), "inputs": "+".join(sorted(ins)), "parameters": params,
             "device": device, "precision": precision}
 
 
@@ -473,54 +473,6 @@ def measure(names: Sequence[str], sizes: Sequence[tuple[int, int]], *, repeats: 
 
 
 # ----------------------------------------------------------------------------------------------
-# Accuracy against time
-# ----------------------------------------------------------------------------------------------
-
-def sweep_resolution(results: pd.DataFrame) -> tuple[int, int] | None:
-    """The (width, height) most of a sweep's rows were measured at (``None`` for no rows)."""
-    if not len(results):
-        return None
-    counts = results.groupby(["width", "height"]).size().sort_values(ascending=False, kind="mergesort")
-    return tuple(int(v) for v in counts.index[0])
-
-
-def join_accuracy(results: pd.DataFrame, timing: pd.DataFrame, source: str) -> pd.DataFrame:
-    """Mean PSNR and SSIM per method from sweep ``results`` beside its ms per frame from ``timing``.
-
-    The time is taken at the sweep's resolution when it was timed, else at the timed resolution
-    closest in pixel count (``resolution`` says which). Methods without an ok timing keep a NaN time.
-    A method that streams (``stream_ms`` timed) has two honest costs: ``ms_per_frame`` is its cold
-    start (one whole call, a recurrent method's warm-up over the history included) and
-    ``stream_ms`` one new frame of a running video; for the others ``stream_ms`` is NaN.
-
-    Returns
-    -------
-    DataFrame ``method, family, ms_per_frame, psnr, ssim, resolution, results, stream_ms``.
-    """
-    summary = tb.method_summary(results)
-    summary = summary[summary["cells_ok"] > 0]
-    sweep_w, sweep_h = sweep_resolution(results) or (0, 0)
-    ok = timing[timing["status"] == "ok"]
-    records = []
-    for r in summary.itertuples():
-        t = ok[ok["method"] == r.method]
-        ms, res, cold, stream = math.nan, "", math.nan, math.nan
-        if len(t):
-            dist = (t["width"] * t["height"] - sweep_w * sweep_h).abs().to_numpy()
-            exact = t[(t["width"] == sweep_w) & (t["height"] == sweep_h)]
-            pick = exact.iloc[0] if len(exact) else t.iloc[int(np.argmin(dist))]
-            ms, res = float(pick["ms_per_frame"]), str(pick["resolution"])
-            cold = float(pick.get("cold_ms", math.nan))
-            stream = float(pick.get("stream_ms", math.nan))
-            if not math.isnan(stream):  # a streaming method: its point is the cold start, beside its streaming cost
-                ms = cold
-        records.append({"method": r.method, "family": r.family, "ms_per_frame": ms, "psnr": r.psnr, "ssim": r.ssim,
-                        "resolution": res, "results": source, "stream_ms": stream})
-    return pd.DataFrame(records, columns=["method", "family", "ms_per_frame", "psnr", "ssim", "resolution", "results",
-                                          "stream_ms"])
-
-
-# ----------------------------------------------------------------------------------------------
 # Command line
 # ----------------------------------------------------------------------------------------------
 
@@ -532,7 +484,7 @@ def method_names(text: str | None) -> tuple[str, ...]:
     InputError
         An unknown name (the message lists the known ones), or no method registered at all.
     """
-    from bench.grid import parse_list
+    from bench.harness.grid import parse_list
     from neuspike import methods as registry
 
     for problem in registry.load_entry_points():

@@ -1,6 +1,6 @@
-"""The report of a dataset run (:mod:`bench.datasets`), from its folder alone.
+"""The report of a dataset run (:mod:`bench.harness.datasets`), from its folder alone.
 
-Called by :func:`bench.reporting.build_report` when ``config.json`` holds a ``dataset``. Writes
+Called by :func:`bench.reporting.build.build_report` when ``config.json`` holds a ``dataset``. Writes
 
 ``tables/dataset.md`` / ``.csv``   one row per recording and method: inputs, normalisation, instants
                                    ok / failed / skipped, the mean of each metric over the instants
@@ -16,16 +16,16 @@ Called by :func:`bench.reporting.build_report` when ``config.json`` holds a ``da
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from bench import figures as figs
-from bench import tables as tb
-from bench.results import ERROR, OK, SKIPPED
+from bench.reporting import figures as figs
+from bench.reporting import tables as tb
+from bench.harness.images import recording_image_path, safe_name
+from bench.harness.results import ERROR, OK, SKIPPED
 
 #: Tiles per row of a contact sheet.
 SHEET_COLUMNS = 4
@@ -92,12 +92,6 @@ def failures(frame: pd.DataFrame) -> pd.DataFrame:
     return g[cols].reset_index(drop=True)
 
 
-def image_path(images_dir: str | os.PathLike, recording: str, name: str) -> Path:
-    """Where a method's (or ``"gt"``'s) image of a recording's middle instant is kept:
-    ``images/<recording>/<method>.png`` (names through :func:`bench.tables.safe_name`)."""
-    return Path(images_dir) / tb.safe_name(recording) / f"{tb.safe_name(name)}.png"
-
-
 def contact_sheet(folder: Path, recording: str, frame: pd.DataFrame) -> np.ndarray | None:
     """uint8 sheet of a recording's saved images (``images/<recording>/``), or ``None`` without images."""
     from neuspike.formats.images import to_uint8
@@ -107,7 +101,7 @@ def contact_sheet(folder: Path, recording: str, frame: pd.DataFrame) -> np.ndarr
     names = ["gt"] + [m for m in tb.method_order(frame) if m in set(sub["method"])]
     tiles = []
     for name in names:
-        path = image_path(folder / "images", recording, name)
+        path = recording_image_path(folder / "images", recording, name)
         if not path.is_file():
             continue
         image = figs.read_gray(path)
@@ -186,8 +180,8 @@ def protocol_blocks(dataset: dict[str, Any]) -> list[tuple[str, str]]:
 def build_dataset_report(inputs: Any, out: Path, *, provenance: list[tuple[str, str]]) -> Path:
     """Write the tables, the contact sheets and ``report.pdf`` of a dataset folder; return the PDF's path.
 
-    ``inputs`` is :func:`bench.reporting.load_inputs`'s; ``provenance`` the title page's provenance
-    blocks (:func:`bench.reporting.title_blocks` without the results).
+    ``inputs`` is :func:`bench.reporting.build.load_inputs`'s; ``provenance`` the title page's provenance
+    blocks (:func:`bench.reporting.build.title_blocks` without the results).
     """
     from neuspike.formats.images import write_png
     from neuspike.utils.atomic import write_text
@@ -229,7 +223,7 @@ def build_dataset_report(inputs: Any, out: Path, *, provenance: list[tuple[str, 
                 sheet = contact_sheet(inputs.folder, recording, f)
                 if sheet is None:
                     continue
-                write_png(fig_dir / f"sheet_{tb.safe_name(recording)}.png", sheet.astype(np.float32) / 255.0, clip=False)
+                write_png(fig_dir / f"sheet_{safe_name(recording)}.png", sheet.astype(np.float32) / 255.0, clip=False)
                 fig = plt.figure(figsize=figs.PAGE_SIZE_IN)
                 fig.text(0.04, 0.96, f"{recording}: every method at its middle instant", fontsize=13, weight="bold",
                          va="top")

@@ -1,14 +1,14 @@
 """The paper's statements about its Figures 3 and 4 and Table 3, checked against our numbers.
 
 Each claim (from the paper's discussion of those figures and that table) is a small function over the long results DataFrame
-(:mod:`bench.results`) that returns ``(status, evidence)``: ``status`` is one of
+(:mod:`bench.harness.results`) that returns ``(status, evidence)``: ``status`` is one of
 :data:`HOLDS`, :data:`FAILS` or :data:`UNCHECKED` ("cannot check": the axis or the methods the
 claim needs are not in the results), and ``evidence`` gives the numbers the verdict rests on.
 
 Common rules
     * Numbers are mean PSNR (dB) over scenes and seeds of the ok rows at each axis value
-      (:func:`bench.tables.axis_means`).
-    * Families come from the methods' inputs (:func:`bench.tables.method_families`): *spike* methods
+      (:func:`bench.reporting.tables.axis_means`).
+    * Families come from the methods' inputs (:func:`bench.reporting.tables.method_families`): *spike* methods
       consume spikes only, *event* methods events only, *fusion* methods both. TFP variants are the
       methods named ``tfp`` or ``tfp-*``; TFI is ``tfi``; SNM is ``snm``.
     * "Rises with the axis" means: the value at the largest axis value exceeds the value at the
@@ -32,11 +32,11 @@ from typing import Callable, Sequence
 import numpy as np
 import pandas as pd
 
-from bench.results import method_descriptions, tfp_windows
+from bench.harness.results import method_descriptions, tfp_windows
 
 #: The ``implementation`` of the NeuSpike-Net methods in their description.
 NEUSPIKE_NET_IMPLEMENTATION = "neuspike.nets.method.NeuSpikeNetMethod"
-from bench.tables import axis_label, axis_means, method_families, ok_rows, swept_axes
+from bench.reporting.tables import axis_label, axis_means, method_families, ok_rows, swept_axes
 from neuspike.errors import one_line
 
 HOLDS = "holds"

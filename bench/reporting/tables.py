@@ -1,7 +1,7 @@
 """Tables of a results folder: aggregations of ``results.csv`` and their Markdown and CSV forms.
 
 Every function here is a pure function of the results DataFrame (the long form of
-:mod:`bench.results`: one row per method, scene, condition, seed and metric). Only rows with
+:mod:`bench.harness.results`: one row per method, scene, condition, seed and metric). Only rows with
 ``status == "ok"`` and a non-missing ``value`` enter an average; failed and skipped methods are
 listed in their own table (:func:`failures_table`) rather than shrinking an average.
 
@@ -30,8 +30,9 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from bench.cells import METRICS
-from bench.grid import AXES
+from bench.harness.cells import METRICS
+from bench.harness.grid import AXES
+from bench.harness.results import family_of
 
 METRIC_LABELS: Mapping[str, str] = {
     "psnr": "PSNR (dB)", "ssim": "SSIM", "psnr_affine": "PSNR, affine-aligned (dB)",
@@ -94,18 +95,6 @@ def _registry_inputs(name: str) -> frozenset[str]:
         return frozenset()
 
 
-def family_of(inputs: Iterable[str]) -> str:
-    """``"spike"``, ``"event"``, ``"fusion"`` or ``"unknown"`` from a method's inputs."""
-    ins = frozenset(inputs)
-    if ins == {"spikes"}:
-        return "spike"
-    if ins == {"events"}:
-        return "event"
-    if ins == {"spikes", "events"}:
-        return "fusion"
-    return "unknown"
-
-
 def method_families(frame: pd.DataFrame) -> dict[str, str]:
     """``{method: family}`` for every method in ``frame``."""
     return {m: family_of(ins) for m, ins in method_inputs(frame).items()}
@@ -145,12 +134,6 @@ def axis_label(axis: str, value: Any) -> str:
     if axis == "motion":
         return str(int(value))
     return str(value)
-
-
-def safe_name(name: str) -> str:
-    """``name`` with every character other than letters, digits, ``. _ - =`` replaced by ``_``
-    (how scene and method names become file and folder names)."""
-    return re.sub(r"[^A-Za-z0-9._=-]", "_", str(name))
 
 
 AXIS_TITLES: Mapping[str, str] = {"light": "light scale L", "motion": "motion scale S", "noise": "noise level"}

@@ -1,19 +1,19 @@
 """The sweep harness: every cell of a grid with every requested method, resumable (the library behind
 ``python -m bench.sweep`` and ``python -m bench.noise``; the commands live in :mod:`bench.sweep`).
 
-A sweep runs every cell of a grid (:mod:`bench.grid`) with every requested method through
-:func:`run_tasks`, the resumable loop that :mod:`bench.datasets` shares (its tasks are the instants
+A sweep runs every cell of a grid (:mod:`bench.harness.grid`) with every requested method through
+:func:`run_tasks`, the resumable loop that :mod:`bench.harness.datasets` shares (its tasks are the instants
 of real recordings), and writes into its output folder:
 
 ``config.json``     the resolved sweep (grid, scene specs, sensor, methods, what each method needs,
                     the device and each learned method's precision) and how it was executed
-``metadata.json``   provenance (:mod:`bench.provenance`): commit, versions, machine, executor,
+``metadata.json``   provenance (:mod:`bench.harness.provenance`): commit, versions, machine, executor,
                     threads per worker, start and end of each run
 ``parts/<cell>.csv`` one cell's rows, written atomically when the cell finishes
-``results.csv``     every row (:mod:`bench.results`), assembled from the parts, sorted
+``results.csv``     every row (:mod:`bench.harness.results`), assembled from the parts, sorted
 ``errors/<cell>.txt`` tracebacks of the failures of a cell, when any
 ``images/``         reconstructions and ground truth for the report's figure grid, in the layout
-                    of :mod:`bench.reporting` (``images/<scene>/<axis>=<value>/<method>.png``): for the
+                    of :mod:`bench.reporting.build` (``images/<scene>/<axis>=<value>/<method>.png``): for the
                     swept axis, of the first seed with the other axes at their first value
 ``cache/``          simulated recordings (:mod:`neuspike.simulation.cache`), unless ``--cache`` points elsewhere:
                     one file per modality, so a method added to a finished sweep simulates nothing
@@ -24,7 +24,7 @@ Resuming
     Finished cells are never recomputed: a rerun of the same command after a crash, an interrupt or
     a kill runs only the cells without a part file, then assembles ``results.csv``, which equals an
     uninterrupted run's in every column except the timing columns
-    (:data:`bench.results.TIMING_COLUMNS`), which measure each run anew. A rerun with a different
+    (:data:`bench.harness.results.TIMING_COLUMNS`), which measure each run anew. A rerun with a different
     configuration in the same folder is refused, another ``--device`` or a precision resolved
     differently included (``--force`` replaces the old results; cached
     recordings stay valid since their keys hold everything that determines them). Cells whose
@@ -40,7 +40,6 @@ Exit status
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import json
 import os
 import shutil
@@ -52,12 +51,12 @@ from typing import Any, Iterator
 
 import pandas as pd
 
-from bench import grid as grids
-from bench.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
-from bench.executors import DaskExecutor, make_executor
-from bench.grid import Grid
-from bench.provenance import LoadWatch, collect, finish, now_iso
-from bench.results import ERROR, OK, assemble, part_path, read_csv, write_part
+from bench.harness import grid as grids
+from bench.harness.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
+from bench.harness.executors import DaskExecutor, make_executor
+from bench.harness.grid import Grid
+from bench.harness.provenance import LoadWatch, collect, finish, now_iso
+from bench.harness.results import ERROR, OK, assemble, part_path, read_csv, write_part
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.checks import check_positive_int
@@ -156,8 +155,8 @@ class Execution:
     Parameters
     ----------
     executor : str or executor object
-        ``"local"`` or ``"dask"``, or an instance of :class:`~bench.executors.LocalExecutor` /
-        :class:`~bench.executors.DaskExecutor`.
+        ``"local"`` or ``"dask"``, or an instance of :class:`~bench.harness.executors.LocalExecutor` /
+        :class:`~bench.harness.executors.DaskExecutor`.
     workers : int
         Worker processes (local) or LocalCluster workers (dask).
     scheduler : str or None
@@ -171,7 +170,7 @@ class Execution:
     use_cache : bool
         ``False`` simulates every cell afresh and stores nothing.
     plugins : tuple of str
-        Plug-in modules each worker imports (see :func:`bench.cells.load_plugins`).
+        Plug-in modules each worker imports (see :func:`bench.harness.cells.load_plugins`).
     device : str
         Torch device of learned methods (default ``"cpu"``). It and the precision each learned
         method resolves on it change the results, so both are part of the sweep's identity
@@ -268,7 +267,7 @@ class SweepOutcome:
 def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
     """Which methods can run here, what they consume, and the event history they need.
 
-    The methods are built here by :func:`bench.cells.instances`, the same per-process instances the
+    The methods are built here by :func:`bench.harness.cells.instances`, the same per-process instances the
     cells of this process use (so each is built once per worker): unknown names and a device that
     cannot be used raise :class:`InputError` before anything runs; a creation that fails raises;
     :class:`~neuspike.methods.MethodUnavailable` marks a method as skipped. The modalities simulated
@@ -368,7 +367,7 @@ def _diff_paths(old: Any, new: Any, path: str = "") -> list[str]:
 
 def check_config(out: Path, config: dict[str, Any], force: bool, *, key: str = "sweep") -> bool:
     """Compare ``config`` with the ``key`` entry of an existing ``config.json`` (``"sweep"``, or
-    ``"dataset"`` for :mod:`bench.datasets`); return whether the old results are stale.
+    ``"dataset"`` for :mod:`bench.harness.datasets`); return whether the old results are stale.
 
     Raises
     ------
@@ -510,10 +509,8 @@ def _remove_stale_temporaries(out: Path) -> None:
 
 
 def _write_images(images_dir: Path, axis: str, cell: grids.Cell, images: dict[str, Any]) -> None:
-    """Write a cell's images in :mod:`bench.reporting`'s layout (nothing when that module is absent)."""
-    if importlib.util.find_spec("bench.reporting") is None:
-        return
-    from bench.reporting import image_path, write_image_png
+    """Write a cell's images in the layout of :mod:`bench.harness.images` (the report reads them back)."""
+    from bench.harness.images import image_path, write_image_png
 
     value = getattr(cell.condition, axis)
     for name, image in images.items():
@@ -527,22 +524,6 @@ def _check_oversubscription(workers: int, threads: int) -> None:
     if workers * threads > usable:
         raise InputError(f"--workers {workers} x --threads {threads} = {workers * threads} threads exceed the "
                          f"{usable} usable CPU(s) here; use --threads {max(1, usable // workers)} (or fewer workers)")
-
-
-def build_report_if_available(out: Path) -> tuple[Path | None, str | None, bool]:
-    """Call ``bench.reporting.build_report(out)`` when that module exists.
-
-    Returns ``(pdf_path, note, failed)``: a note instead of a path when the module is not installed
-    or the report failed.
-    """
-    if importlib.util.find_spec("bench.reporting") is None:
-        return None, "report: bench.reporting is not available here; results.csv holds every number", False
-    try:
-        from bench.reporting import build_report
-
-        return Path(build_report(out)), None, False
-    except Exception as exc:
-        return None, f"report failed: {one_line(exc)}", True
 
 
 # ----------------------------------------------------------------------------------------------
@@ -668,7 +649,7 @@ def _run_tasks(
         The output folder (checked writable).
     tasks : list
         Picklable tasks with a unique ``cell_id``; ``run_fn(task)`` returns a
-        :class:`~bench.cells.CellResult` and never raises for a method's failure.
+        :class:`~bench.harness.cells.CellResult` and never raises for a method's failure.
     config : dict
         What ``config.json`` holds besides ``execution`` (the identity :func:`check_config` compared).
     stale : bool
@@ -799,8 +780,6 @@ def _run_tasks(
                  threads_observed=sorted(observed_threads), time_split=split,
                  wall_seconds=outcome.seconds, **(watch.summary() if watch is not None else {}))
     write_json(out / "metadata.json", run)
-    if execution.report and not frame.empty:
-        outcome.report_path, outcome.report_note, outcome.report_failed = build_report_if_available(out)
     return outcome
 
 

@@ -30,12 +30,12 @@ Columns (:data:`COLUMNS`)
                     recording's metadata, so a cached recording reports the time it originally took
 ``stage_seconds``   JSON object ``{"modality:name": seconds}`` for every stage that ran
 ``time_s``          the reconstruction instant in the recording's sensor seconds (rows of a dataset,
-                    :mod:`bench.datasets`); empty for simulated cells
+                    :mod:`bench.harness.datasets`); empty for simulated cells
 ``instant``         the instant's index among its recording's instants (datasets); empty otherwise
 ``reference``       the ground-truth file a dataset row was scored against, as the manifest names it;
                     empty where there is none (no-reference measures) and for simulated cells
 
-Rows of a dataset (:mod:`bench.datasets`) hold a recording instead of a simulated cell: ``scene`` is
+Rows of a dataset (:mod:`bench.harness.datasets`) hold a recording instead of a simulated cell: ``scene`` is
 the recording's name, ``kind`` its inputs (``spikes``, ``events`` or ``events+spikes``), ``image``
 its files, ``planes`` the spike window; ``light``, ``motion``, ``seed`` and ``noise`` are empty
 (nothing was simulated), and the metrics are the full-reference ones where a ground truth exists
@@ -197,3 +197,15 @@ def base_row(**fields: Any) -> dict[str, Any]:
     row.update(recurrent=False, parameters=0)
     row.update(fields)
     return row
+
+
+def family_of(inputs: Iterable[str]) -> str:
+    """``"spike"``, ``"event"``, ``"fusion"`` or ``"unknown"`` from a method's inputs."""
+    ins = frozenset(inputs)
+    if ins == {"spikes"}:
+        return "spike"
+    if ins == {"events"}:
+        return "event"
+    if ins == {"spikes", "events"}:
+        return "fusion"
+    return "unknown"
