@@ -16,6 +16,7 @@ from typing import Sequence
 
 from bench.harness.executors import EXECUTORS
 from neuspike.errors import InputError, NeuSpikeError
+from neuspike.utils.cli import MethodOptions
 
 EPILOG = """\
 layouts read without a manifest (--layout auto picks the one the folder is in):
@@ -89,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     m = p.add_argument_group("what to run")
     m.add_argument("--methods", help="comma-separated registry names (default: every registered method; each "
                    "recording runs those whose inputs it has)")
-    m.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS)")
+    MethodOptions.add_arguments(m, flags=("weights",))
     m.add_argument("--plugin", action="append", default=[], metavar="MODULE",
                    help="import MODULE (a module name or a .py path) in every worker to register extra methods")
     r = p.add_argument_group("how to run")
@@ -98,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--workers", type=int, default=1, help="worker processes (default: 1 = in this process)")
     r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask)")
     r.add_argument("--threads", type=int, help="torch threads per worker (default: the usable CPUs that other processes leave idle, / workers)")
-    r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
+    MethodOptions.add_arguments(r, flags=("device", "precision"))
     r.add_argument("--allow-failures", action="store_true", help="exit 0 even when methods or recordings failed")
     r.add_argument("--force", action="store_true", help="replace results of a different configuration in --out")
     r.add_argument("--retry-failed", action="store_true", help="run instants with failures again")
@@ -120,9 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from bench.harness import manifest as mf
         from bench.harness.datasets import DatasetSpec, prepare, run_dataset
         from bench.harness.runner import Execution
-        from neuspike import methods as registry
         from neuspike.formats.staging import check_writable_folder
-        from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
         folder = Path(args.folder)
         if not folder.is_dir():
@@ -147,14 +146,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             path = mf.write_manifest(out / mf.MANIFEST_NAME, manifest)
             print(f"manifest: {path}")
             return 0
-        weights = weights_dir_from_env(args.weights)
-        if weights is not None and not weights.is_dir():
-            origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
-            raise InputError(f"{origin}: {str(weights)!r} is not a folder")
+        options = MethodOptions.from_args(args)
+        weights = options.weights_dir
         spec = DatasetSpec(name=folder.resolve().name, root=str(folder), manifest=manifest, methods=_methods(args),
                            weights=str(weights) if weights is not None else None, allow_outside=args.allow_outside)
         # an unusable device refuses before anything is announced (run_dataset checks the methods it runs)
-        registry.check_device(args.device, [registry.entry(name) for name in spec.methods])
+        from neuspike import methods as registry
+
+        registry.check_device(options.device, [registry.entry(name) for name in spec.methods])
         resolved = prepare(spec)
         n = sum(len(r.instants) for r in resolved)
         damaged = [r.recording.name for r in resolved if r.damaged]
@@ -162,7 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               + (f"; unreadable (their rows will fail): {', '.join(damaged)}" if damaged else ""), file=sys.stderr)
         execution = Execution(
             executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads,
-            device=args.device, use_cache=False, plugins=tuple(args.plugin), allow_failures=args.allow_failures,
+            device=options.device, precision=options.precision, use_cache=False, plugins=tuple(args.plugin), allow_failures=args.allow_failures,
             force=args.force, retry_failed=args.retry_failed, progress=False if args.no_progress else None,
             report=not args.no_report,
         )

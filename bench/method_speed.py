@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import numpy as np
 
 from neuspike.errors import InputError, one_line
+from neuspike.utils.cli import MethodOptions
 from neuspike.utils.parallel import set_threads
 from neuspike.utils.resources import usable_cpus
 
@@ -361,7 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, default=1, help="untimed calls first (default 1)")
     parser.add_argument("--threads", type=int,
                         help="torch and numba threads, both pinned (default: the CPUs this process may use)")
-    parser.add_argument("--weights", help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
+    MethodOptions.add_arguments(parser, flags=("weights",))
     parser.add_argument("--out", help="also write method_speed.csv and method_speed.md into this folder")
     return parser
 
@@ -372,7 +373,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     from bench.harness import timer
     from bench.harness.provenance import machine
     from neuspike.utils.atomic import write_text
-    from neuspike.methods.weights import weights_dir_from_env
 
     try:
         if args.out:
@@ -380,9 +380,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             # before measuring, not after; created by the first write, so a refusal leaves no folder
             check_writable_folder(Path(args.out), what="--out", create=False)
-        weights = weights_dir_from_env(args.weights)
-        if weights is not None and not weights.is_dir():
-            raise InputError(f"weights folder {str(weights)!r} is not a folder")
+        weights = MethodOptions.from_args(args).weights_dir
         pin_threads(timer.check_count("--threads", args.threads, 1) if args.threads is not None else usable_cpus())
         names = timer.method_names(args.methods)
         frame = measure(names, repeats=args.repeats, warmup=args.warmup, weights_dir=weights,

@@ -18,6 +18,7 @@ from bench.harness.executors import EXECUTORS
 from neuspike.conditions import parse_effects
 from neuspike.errors import InputError, NeuSpikeError
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
+from neuspike.utils.cli import MethodOptions
 
 if TYPE_CHECKING:
     from bench.harness.runner import Execution, SweepSpec
@@ -76,8 +77,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                    help="event history before each window for recurrent methods to warm up on, in window "
                    f"durations (default: {DEFAULT_HISTORY_WINDOWS:g}; simulated only when a recurrent "
                    "method is requested)")
-    g.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
-                        "the suite's own trained weights ship with it and need no flag")
+    MethodOptions.add_arguments(g, flags=("weights",))
     g.add_argument("--plugin", action="append", default=[], metavar="MODULE",
                    help="import MODULE (a module name or a .py path) in every worker to register extra "
                    "methods (repeatable); this runs its code, so name only files you trust")
@@ -90,12 +90,9 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("--scheduler", help="address of an existing Dask scheduler (with --executor dask); "
                    "without it a local Dask cluster of --workers processes is started")
     r.add_argument("--threads", type=int, help="torch threads per worker (default: the usable CPUs that other processes leave idle, / workers)")
-    r.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu; e.g. cuda); "
-                   "part of the sweep's identity with the precision it resolves to, so a resume must use the same; "
-                   "refused when no selected method runs on a torch device")
-    r.add_argument("--precision", choices=("auto", "float32", "bfloat16"),
-                   help="arithmetic of every learned method (default: each method's own, auto = bfloat16 only where "
-                   "a measured step is faster on this device); part of the sweep's identity, as the device is")
+    MethodOptions.add_arguments(r, flags=("device", "precision"),
+                                device_note="; with the precision it resolves to, part of the sweep's identity, so a "
+                                "resume must use the same")
     r.add_argument("--cache", help="folder of cached simulated recordings (default: <out>/cache); "
                    "'none' disables the cache")
     r.add_argument("--allow-failures", action="store_true",
@@ -131,12 +128,8 @@ def spec_from_args(args: argparse.Namespace, name: str, axis: str, noises: Seque
     """Build the :class:`SweepSpec` of a command line."""
     from bench.harness.runner import SweepSpec
     from neuspike.simulation.recording import SensorConfig
-    from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
-    weights = weights_dir_from_env(args.weights)
-    if weights is not None and not weights.is_dir():
-        origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
-        raise InputError(f"{origin}: {str(weights)!r} is not a folder")
+    weights = MethodOptions.from_args(args).weights_dir
     if args.effects is None:
         effects = None
     elif args.effects.strip().lower() == "none":
@@ -167,9 +160,10 @@ def execution_from_args(args: argparse.Namespace) -> Execution:
         from bench.harness.executors import check_scheduler_address
 
         check_scheduler_address(args.scheduler)
+    options = MethodOptions.from_args(args)
     return Execution(
-        executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads, device=args.device,
-        precision=args.precision,
+        executor=args.executor, workers=args.workers, scheduler=args.scheduler, threads=args.threads,
+        device=options.device, precision=options.precision,
         cache_dir=None if cache in (None, "none") else cache, use_cache=(cache != "none"),
         plugins=tuple(args.plugin), allow_failures=args.allow_failures, force=args.force,
         retry_failed=args.retry_failed, progress=False if args.no_progress else None,

@@ -53,7 +53,7 @@ from typing import Iterable, Sequence
 
 from bench.harness import grid as grids
 from neuspike.errors import InputError
-from neuspike.methods.precision import PRECISIONS
+from neuspike.utils.cli import MethodOptions
 from neuspike.simulation.recording import DEFAULT_HISTORY_WINDOWS
 
 #: Default resolutions (width, height): the paper's Table 2.
@@ -115,16 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that "
                         "other processes leave idle)")
-    parser.add_argument("--weights", help="folder of published weights, e.g. FireNet's (default: $NEUSPIKE_WEIGHTS); "
-                                          "the suite's own trained weights need no flag")
-    parser.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
-    parser.add_argument("--precision", choices=PRECISIONS, default="auto",
-                        help="precision of the learned methods (default: auto, bfloat16 only where a measured step "
-                        "is faster than float32 on this device); the row's precision column says what ran")
-    parser.add_argument("--compile", action="store_true",
-                        help="run the learned methods' networks through torch.compile (weights frozen; compiled once per "
-                        "size in the untimed warm-up, 5-20 s each; needs a C++ compiler); the precision column says "
-                        "'compiled'")
+    MethodOptions.add_arguments(parser, flags=("weights", "device", "precision", "compile"))
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -143,17 +134,14 @@ def run(args: argparse.Namespace) -> Path:
     from bench.harness.timer import LIGHT, MOTION, PLANES, check_count, measure, method_names
     from bench.reporting.accuracy import join_accuracy, sweep_resolution
     from neuspike.utils.parallel import set_threads
-    from neuspike.methods.weights import WEIGHTS_ENV, weights_dir_from_env
 
     from neuspike.utils.atomic import write_json, write_text
     from bench.harness.provenance import LoadWatch, command_line, machine, now_iso, package_versions, source_state
     from neuspike.utils.jsonio import portable_path
     from bench.reporting.build import write_timing_tables
 
-    weights = weights_dir_from_env(args.weights)
-    if weights is not None and not weights.is_dir():
-        origin = "--weights" if args.weights is not None else f"${WEIGHTS_ENV}"
-        raise InputError(f"{origin}: {str(weights)!r} is not a folder")
+    options = MethodOptions.from_args(args)
+    weights, precision = options.weights_dir, options.precision or "auto"
     if args.threads is not None:
         set_threads(check_count("--threads", args.threads, 1))
     else:  # the CPUs other processes leave idle: oversubscribed threads wait on each other
@@ -164,12 +152,13 @@ def run(args: argparse.Namespace) -> Path:
     repeats = args.repeats if args.repeats is not None else preset["repeats"]
     warmup = args.warmup if args.warmup is not None else preset["warmup"]
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
-    if args.compile and warmup < 1:
+    if options.compiled and warmup < 1:
         raise InputError("--compile needs at least one warm-up call (--warmup 1 or more): the first call compiles")
     names = method_names(args.methods)
+
     from neuspike import methods as registry
 
-    registry.check_device(args.device, [registry.entry(n) for n in names])  # before any measurement
+    registry.check_device(options.device, [registry.entry(n) for n in names])  # before any measurement
     out = Path(args.out or ("runs/timing-full" if args.full else "runs/timing"))
     from neuspike.formats.staging import check_writable_folder
 
@@ -193,7 +182,7 @@ def run(args: argparse.Namespace) -> Path:
     config = {"timing": {"methods": list(names), "sizes": [f"{w}x{h}" for w, h in sizes], "repeats": repeats,
                          "warmup": warmup, "history_windows": args.history_windows, "light": LIGHT, "motion": MOTION,
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
-                         "device": args.device, "precision": args.precision, "compiled": args.compile,
+                         "device": options.device, "precision": precision, "compiled": options.compiled,
                          "weights": portable_path(weights) if weights is not None else None}}
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
@@ -202,8 +191,8 @@ def run(args: argparse.Namespace) -> Path:
     write_json(out / "metadata.json", meta)
     t0 = time.perf_counter()
     timing = measure(names, sizes, repeats=repeats, warmup=warmup, history_windows=args.history_windows,
-                     weights_dir=weights, device=args.device, precision=args.precision, threads=torch.get_num_threads(),
-                     compiled=args.compile,
+                     weights_dir=weights, device=options.device, precision=precision, threads=torch.get_num_threads(),
+                     compiled=options.compiled,
                      log=lambda s: (watch.read(), print(s, file=sys.stderr, flush=True)))
     write_text(out / "timing.csv", tb.to_csv_text(timing))
     meta = {**meta, "end": now_iso(), "wall_seconds": time.perf_counter() - t0, **watch.summary()}

@@ -71,7 +71,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from neuspike.errors import InputError, NeuSpikeError, one_line
-from neuspike.methods.precision import PRECISIONS
+from neuspike.utils.cli import MethodOptions
 from neuspike.utils.parallel import set_threads
 
 COLUMNS = ("method", "inputs", "status", "frames", "fps", "method_s", "frames_per_s", "real_time_factor",
@@ -442,23 +442,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--methods", default="", help="comma list (default: every registered method)")
     p.add_argument("--size", type=_size, default=(400, 250), help="sensor WxH (default: 400x250)")
     p.add_argument("--event-history", type=float, default=1.0, help="seconds of event history per frame (default: 1)")
-    p.add_argument("--weights", type=Path, help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
+    MethodOptions.add_arguments(p, flags=("weights",))
     p.add_argument("--cache", type=Path, help="keep the simulated recording here and reuse it")
     p.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that other "
                    "processes leave idle)")
-    p.add_argument("--device", default="cpu", help="torch device of the learned methods (default: cpu; e.g. cuda); "
-                   "refused when this machine lacks it or no requested method runs on a torch device")
-    p.add_argument("--precision", choices=PRECISIONS,
-                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
-                   "faster than float32 on this device)")
-    p.add_argument("--compile", action="store_true",
-                   help="run the learned methods' networks through torch.compile (weights frozen; needs a C++ "
-                   "compiler); each is compiled on two untimed frames streamed first (their time: the row's compile_s), "
-                   "then timed from a fresh start")
-    p.add_argument("--read-out", choices=("key", "window"),
-                   help="recurrent event networks: 'key' (default) steps the events after the last full window so "
-                   "a frame shows its own instant; 'window' shows the last full window (at most one window "
-                   "earlier), one network step fewer per frame, at the price of frames that lag on fast motion")
+    MethodOptions.add_arguments(p, flags=("device", "precision", "compile", "read_out"))
     p.add_argument("--out", type=Path, default=None,
                    help=f"output folder (default: {DEFAULT_OUT}; with --full: {DEFAULT_OUT_FULL})")
     p.add_argument("--plot-only", action="store_true", help="redraw accuracy_vs_speed.png from --out/results.csv")
@@ -474,8 +462,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.plot_only:
             plot(args.out / "results.csv", args.out / "accuracy_vs_speed.png")
             return 0
-        from neuspike.methods.weights import weights_dir_from_env
-
+        options = MethodOptions.from_args(args)
         if args.threads is not None and args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
         duration = args.duration if args.duration is not None else (1.0 if args.full else 0.05)
@@ -489,9 +476,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             threads = announce_default_threads()
         spec = VideoBenchSpec(duration_s=duration, fps=args.fps, methods=methods, width=args.size[0],
                               height=args.size[1], event_history_s=args.event_history, threads=threads,
-                              device=args.device, compiled=args.compile,
-                              precision=args.precision, read_out=args.read_out)
-        rows = run(spec, args.out, cache=args.cache, weights_dir=weights_dir_from_env(args.weights),
+                              device=options.device, compiled=options.compiled,
+                              precision=options.precision, read_out=options.read_out)
+        rows = run(spec, args.out, cache=args.cache, weights_dir=options.weights_dir,
                    progress=not args.no_progress)
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence, TextIO
 
-from neuspike.utils.cli import PRECISIONS, WEIGHTS_ENV, ArgumentParser, UsageError, weights_dir_from_env
+from neuspike.utils.cli import WEIGHTS_ENV, ArgumentParser, MethodOptions, UsageError
 from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -133,14 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "neuspike-net set its image's mean level from the spike count")
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: a simulated window's own length, else 256)")
-    p.add_argument("--weights", type=Path, metavar="DIR",
-                   help=f"folder of published weights, e.g. FireNet's (default: ${WEIGHTS_ENV}); "
-                        "the suite's own trained weights ship with it and need no flag")
-    p.add_argument("--device", default="cpu",
-                   help="torch device of learned methods (default: cpu; e.g. cuda)")
-    p.add_argument("--precision", choices=PRECISIONS,
-                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
-                        "faster than float32 on this device; float32 for numbers that match other machines)")
+    MethodOptions.add_arguments(p, flags=("weights", "device", "precision"))
     p.add_argument("--gt", type=Path, metavar="IMAGE", help="ground-truth image (.png or .npy) for PSNR and SSIM")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     return p
@@ -285,12 +278,12 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
     """The frozen spec of parsed arguments."""
     if args.out is None:
         raise InputError("give an output folder with --out DIR")
+    options = MethodOptions.from_args(args)
     return ReconstructSpec(
         methods=_split_methods(args.method), out=args.out, spikes=args.spikes, events=args.events,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
         plane=args.plane, at_s=args.at_s, gain=args.gain, dark_rate=args.dark_rate, window_planes=args.window_planes,
-        weights=weights_dir_from_env(args.weights), gt=args.gt, device=args.device,
-        precision=args.precision,
+        weights=options.weights_dir, gt=args.gt, device=options.device, precision=options.precision,
     )
 
 

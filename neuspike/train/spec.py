@@ -231,7 +231,7 @@ class WindowData:
         (off; earlier specs and their shard keys mean 0).
     sweep_scenes : bool
         With ``sweep_fraction``: the sweep cells also take the sweeps' scenes, the four kinds of
-        ``bench.grid`` (pan, zoom, fan, still) in equal shares (the kind drawn from its own stream,
+        ``bench.harness.grid`` (pan, zoom, fan, still) in equal shares (the kind drawn from its own stream,
         ``derive_rng(seed, "sweep-kind", split, index)``), each with the sweeps' own parameters (the
         ``SceneSpec`` defaults: a zoom at 5 Hz about the centre, 3 blades of 30 degrees and contrast
         0.25 turning at 1500 rpm about the centre), on the training photographs at the drawn scales.

@@ -53,7 +53,7 @@ from neuspike.train.spec import KIND_WEIGHTS, SWEEP_POINTS, SWEEP_SPEED_PX_S, Tr
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
 
-#: The sweeps' scene kinds (``bench.grid.SCENE_KINDS``), drawn alike for ``sweep_scenes`` cells.
+#: The sweeps' scene kinds (``bench.harness.grid.SCENE_KINDS``), drawn alike for ``sweep_scenes`` cells.
 SWEEP_SCENE_KINDS = ("pan", "zoom", "fan", "still")
 #: Effects every training cell declares (the sweeps' defaults).
 BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
@@ -163,7 +163,7 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         elif kind == "zoom":
             rate = float(rng.uniform(1.0, 20.0) * rng.choice([-1.0, 1.0]))
             scene = SceneSpec(kind="zoom", image=image, size=size, zoom_rate_hz=rate, focus=focus)
-            if sweep_scene:  # the sweeps' zoom (SceneSpec's defaults, as bench.grid builds it)
+            if sweep_scene:  # the sweeps' zoom (SceneSpec's defaults, as bench.harness.grid builds it)
                 scene = SceneSpec(kind="zoom", image=image, size=size)
         elif kind == "fan":
             blades = int(rng.integers(2, 6))

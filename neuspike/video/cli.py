@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
-from neuspike.utils.cli import PRECISIONS, ArgumentParser, UsageError
+from neuspike.utils.cli import ArgumentParser, MethodOptions, UsageError
 from neuspike.errors import InputError, NeuSpikeError, one_line
 
 if TYPE_CHECKING:  # numpy, OpenCV and torch load after the arguments are parsed: --help answers at once
@@ -140,20 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dark-rate", type=float, metavar="D",
                    help="spikes per plane a pixel fires in darkness, mean over pixels (a capped calibration; "
                         "default: the recording's)")
-    p.add_argument("--weights", type=Path, metavar="DIR", help="folder of published weights (default: $NEUSPIKE_WEIGHTS)")
-    p.add_argument("--device", default="cpu", help="torch device of learned methods (default: cpu)")
-    p.add_argument("--precision", choices=PRECISIONS,
-                   help="precision of the learned methods (default: auto, bfloat16 only where a measured step is "
-                        "faster than float32 on this device; float32 for numbers that match other machines)")
-    p.add_argument("--compile", action="store_true",
-                   help="run the learned methods' networks through torch.compile (needs a C++ compiler): the "
-                        "first frames take tens of seconds longer while it compiles, every later frame is faster "
-                        "(a long video's choice; python -m bench.video --compile measures the gain here)")
-    p.add_argument("--read-out", choices=("key", "window"),
-                   help="recurrent event networks (e2vid, firenet-sim, firenet): 'key' (default) steps the events "
-                        "after the last full window as a partial one so a frame shows its own instant; 'window' "
-                        "shows the last full window instead (at most one window earlier, said in the label), "
-                        "one network step fewer per frame, at the price of frames that lag on fast motion")
+    MethodOptions.add_arguments(p, flags=MethodOptions.FLAGS)
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
@@ -171,8 +158,6 @@ def _split(values: Sequence[str]) -> tuple[str, ...]:
 
 def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     """The frozen spec of parsed arguments (usage checks only; files are checked by :func:`run`)."""
-    from neuspike.utils.cli import weights_dir_from_env
-
     if args.out is None:
         raise InputError("give an output folder with --out DIR")
     methods = _split(args.method)
@@ -182,14 +167,16 @@ def spec_from_args(args: argparse.Namespace) -> VideoSpec:
     bad = [f for f in frames if f not in FRAME_KINDS]
     if bad:
         raise InputError(f"--frames: expected png, npy, png,npy or none, got {args.frames!r}")
+    options = MethodOptions.from_args(args)
     return VideoSpec(
         methods=methods, out=args.out, recording=args.recording, spikes=args.spikes, events=args.events,
         fps=args.fps, start_s=args.start, end_s=args.end, play_fps=args.play_fps, frames=frames,
         sheet_frames=args.sheet_frames, sheet_width=args.sheet_width, window_planes=args.window_planes,
         event_history_s=args.event_history,
         height=args.height, width=args.width, raw_width=args.raw_width, plane_rate_hz=args.plane_rate,
-        gain=args.gain, dark_rate=args.dark_rate, weights=weights_dir_from_env(args.weights), device=args.device,
-        precision=args.precision, compiled=args.compile, read_out=args.read_out, progress=not args.no_progress,
+        gain=args.gain, dark_rate=args.dark_rate, weights=options.weights_dir, device=options.device,
+        precision=options.precision, compiled=options.compiled, read_out=options.read_out,
+        progress=not args.no_progress,
     )
 
 

@@ -11,6 +11,7 @@ import pytest
 
 from neuspike import methods as registry
 from neuspike import metrics
+from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.reconstruct import ReconstructSpec, _prepare_methods, build_parser, main, spec_from_args
 
@@ -151,6 +152,9 @@ def test_weights_folder_reaches_only_entries_that_declare_weights(dummies, tmp_p
     (no_env,) = _prepare_methods(ReconstructSpec(methods=(WEIGHTS_NAME,), out=tmp_path, spikes=tmp_path / "s.npz"))
     assert no_env.weights_dir is None
     args = build_parser().parse_args(["--method", WEIGHTS_NAME, "--spikes", "s.npz", "--out", str(tmp_path)])
+    with pytest.raises(InputError, match=r"\$NEUSPIKE_WEIGHTS: .* is not a folder"):  # as every command says it
+        spec_from_args(args)
+    (tmp_path / "env").mkdir()
     assert spec_from_args(args).weights == (tmp_path / "env").resolve()
 
 
