@@ -42,7 +42,9 @@ infinite crossover).
 
 Dark floor: a pixel without a spike in the ``n`` averaged planes has ``r = 0``, whose log does not
 exist; its rate is taken as ``r_min = 0.5 / n`` (half a spike in the averaged planes), the
-estimate's own resolution. The choice is deterministic and recorded (``last_planes``). The sensor's
+estimate's own resolution; where the gain is known and that floor would map above white
+(``r_min > gain``: a very dark scene), it is ``gain / 256`` instead (one 8-bit step), so a dark
+pixel is not drawn white. The choice is deterministic and recorded (``last_planes``). The sensor's
 dark rate (:func:`neuspike.methods.normalisation.dark_level`) is subtracted from ``r`` first, so the
 dark current's spikes are not taken for light.
 
@@ -267,7 +269,10 @@ class ComplementaryFusion(StreamsEventSum, Method):
                                     self.params["spike_planes"])
         rate = causal_spike_rate(stream.planes, start, stop)
         dark_rate, dark_how = dark_level(stream)  # the sensor's floor comes off before the floor of no spikes
-        frame_rate = np.maximum(rate - dark_rate if dark_rate > 0 else rate, DARK_FLOOR_SPIKES / (stop - start))
+        floor = DARK_FLOOR_SPIKES / (stop - start)
+        if stream.gain is not None and floor > stream.gain:  # the floor would map above white: one 8-bit step
+            floor = stream.gain / 256.0
+        frame_rate = np.maximum(rate - dark_rate if dark_rate > 0 else rate, floor)
         cutoff_hz = self.params["cutoff_hz"]
         if cutoff_hz is None:
             cutoff_hz = matched_cutoff_hz(stream.plane_rate_hz, stream.start_s, time_s, start, stop)

@@ -25,6 +25,13 @@ window. The estimate also stays continuous: a pixel with one spike at the window
 infinitely far apart. No constant enters but the window's length (the field's tools put an interval
 of 40 planes there).
 
+Below the window's detection floor
+-----------------------------------
+Where the gain is known and so small that the floor ``1 / (T + 1)`` maps above white
+(``gain * (T + 1) < 1``: a very dark scene or a short window), the bound would turn every pixel
+that lacks a spike on a side white, the darkest brightest. There the pixels without a spike on a
+side take the window's count instead, ``n / T`` (0 for a silent pixel), and the label says so.
+
 TFI searches every plane of the sample's spike window; a sample with a shorter window searches fewer.
 """
 
@@ -142,7 +149,16 @@ class TFI(Method):
 
     def _reconstruct(self, sample: Sample) -> tuple[np.ndarray, str]:
         stream = sample.spikes
-        return stream_rate_to_image(tfi_rate(stream.planes, sample.key_plane), stream)
+        planes, key = stream.planes, sample.key_plane
+        rate = tfi_rate(planes, key)
+        t = planes.shape[0]
+        gain = stream.gain
+        if gain is not None and gain * (t + 1) < 1:  # the bound of a silent side maps above white
+            one_sided = ~(planes[: key + 1].any(axis=0) & planes[key + 1:].any(axis=0))
+            rate[one_sided] = np.count_nonzero(planes[:, one_sided], axis=0) / t
+            image, label = stream_rate_to_image(rate, stream)
+            return image, label + "; a side without a spike counted (the window's floor is above white at this gain)"
+        return stream_rate_to_image(rate, stream)
 
 
 def register_methods(register) -> None:

@@ -464,10 +464,26 @@ def _infer_spike_gt(root: Path, gain: float | None, common: dict[str, Any], heig
                                  f"without a header) takes its size from it: repair or remove the image, or give "
                                  f"--height and --width")
             h, w = size
+            notes.append(_dat_size_note(sp, gt, h, w))
         out.append({"name": sp.stem, "spikes": f"spike/{sp.name}", "height": h, "width": w, "gain": gain, **common,
                     "instants": _centre_plane(sp, h, w),
                     "ground_truth": f"gt/{gt.name}" if gt is not None else None})
     return out
+
+
+def _dat_size_note(dat: Path, gt: Path, height: int, width: int) -> str:
+    """What the manifest says where a headerless ``.dat`` takes its size from its ground truth: the size, and
+    when the file is also a whole number of the Vidar's 400x250 planes and the image is another size, that
+    the size is ambiguous (a downsized ground truth would read the recording as noise)."""
+    from neuspike.streams import VIDAR_SIZE
+
+    note = f"spike/{dat.name}: a .dat has no header; read at {width}x{height}, the size of gt/{gt.name}"
+    vidar_w, vidar_h = VIDAR_SIZE
+    plane_bytes = vidar_w * vidar_h // 8
+    if (width, height) != (vidar_w, vidar_h) and dat.stat().st_size % plane_bytes == 0:
+        note += (f" (the file is also a whole number of the Vidar's {vidar_w}x{vidar_h} planes: if that is its "
+                 f"sensor, give --height {vidar_h} --width {vidar_w} and a ground truth of that size)")
+    return note
 
 
 def _infer_events_frames(root: Path, common: dict[str, Any], notes: list[str]) -> dict[str, Any]:

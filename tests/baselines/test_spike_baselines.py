@@ -459,7 +459,8 @@ def test_hard_cases_give_valid_images_without_warnings(case):
                 image = method.reconstruct(sample)
             assert image.dtype == np.float32 and image.shape == planes.shape[1:], (case, name)
             assert np.isfinite(image).all() and image.min() >= 0 and image.max() <= 1, (case, name)
-            assert method.last_normalisation == ("gain" if gain else "robust-p99")
+            # (a one-plane window at gain 1/32 is below TFI's detection floor: its label adds that it counted)
+            assert method.last_normalisation.split(";")[0] == ("gain" if gain else "robust-p99")
 
 
 def test_hard_case_values():

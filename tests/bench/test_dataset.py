@@ -380,3 +380,25 @@ def test_a_manifest_cannot_read_files_outside_its_dataset_unless_told(spike_gt, 
                                "--allow-outside", "--allow-failures"], capsys)
     written = "".join(p.read_text(errors="replace") for p in out.rglob("*") if p.is_file() and p.suffix in (".csv", ".md", ".json", ".txt"))
     assert "do-not-quote-me" not in written + printed + err  # read as asked, but never quoted
+
+
+def test_a_dat_sized_by_its_ground_truth_says_so_and_names_an_ambiguous_size(spike_gt, tmp_path):
+    """A headerless .dat takes its size from its ground truth: the manifest's notes say which size it was
+    read at; where the file is also a whole number of the Vidar's 400x250 planes (a downsized ground
+    truth of a Vidar recording), the note says so and how to read it at the sensor's size."""
+    import numpy as np
+
+    from neuspike.formats.vidar_dat import write_dat
+
+    manifest = mf.infer_manifest(spike_gt)
+    note = next(n for n in manifest.notes if n.startswith("spike/still.dat"))
+    assert f"read at {W}x{H}, the size of gt/still.png" in note
+    assert "Vidar" not in note  # (the file is not a whole number of 12,500-byte Vidar planes)
+    root = tmp_path / "ds"
+    (root / "spike").mkdir(parents=True)
+    (root / "gt").mkdir()
+    write_dat(root / "spike" / "v.dat", np.zeros((16, 250, 400), bool))  # 16 Vidar planes
+    cv2 = pytest.importorskip("cv2")
+    cv2.imwrite(str(root / "gt" / "v.png"), np.zeros((125, 200), np.uint8))  # a ground truth at half size
+    note = next(n for n in mf.infer_manifest(root).notes if n.startswith("spike/v.dat"))
+    assert "read at 200x125" in note and "give --height 250 --width 400" in note
