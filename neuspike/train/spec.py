@@ -47,6 +47,11 @@ SWEEP_POINTS: tuple[tuple[float, int, str], ...] = (
     tuple((light, 128, "none") for light in sorted(LIGHTS))
     + tuple((1 / 4, m, "none") for m in MOTIONS if m != 128)
     + tuple((1 / 4, 128, n) for n in ("small", "medium", "high")))
+#: The light x noise report's points (every light scale at every noise level, S = 128) joined to the sweeps'.
+LIGHT_NOISE_POINTS: tuple[tuple[float, int, str], ...] = SWEEP_POINTS + tuple(
+    (light, 128, n) for light in sorted(LIGHTS) if light != 1 / 4 for n in ("small", "medium", "high"))
+#: Which points ``sweep_fraction`` draws from (``sweep_grid``).
+SWEEP_GRIDS: dict[str, tuple[tuple[float, int, str], ...]] = {"sweeps": SWEEP_POINTS, "light-noise": LIGHT_NOISE_POINTS}
 #: Pan speed of the sweeps (px/s at the 400x250 sensor's scale).
 SWEEP_SPEED_PX_S = 1000.0
 _PHOTO_DEFAULT: tuple[str, ...] = ("astronaut", "brick", "cat", "cell", "coffee", "grass", "hubble_deep_field",
@@ -229,6 +234,10 @@ class WindowData:
         independently over wide ranges, so a sweep's point (a slow pan at L = 1/4, S = 128 with heavy
         noise, say) is a small corner of it. The validation windows are drawn the same way. Default 0
         (off; earlier specs and their shard keys mean 0).
+    sweep_grid : ``"sweeps"`` or ``"light-noise"``
+        The points ``sweep_fraction`` draws from: the three sweeps' 12 (:data:`SWEEP_POINTS`, the
+        default) or those joined to the light x noise report's 20 (:data:`LIGHT_NOISE_POINTS`: 24, every
+        light scale at every noise level), where light and noise meet as the report crosses them.
     sweep_scenes : bool
         With ``sweep_fraction``: the sweep cells also take the sweeps' scenes, the four kinds of
         ``bench.harness.grid`` (pan, zoom, fan, still) in equal shares (the kind drawn from its own stream,
@@ -295,6 +304,7 @@ class WindowData:
     spike_floor_terms: str = "both"
     train_parts: str = "all"
     sweep_fraction: float = 0.0
+    sweep_grid: str = "sweeps"
     sweep_scenes: bool = False
     sweep_scene_weights: tuple[float, float, float, float] | None = None
     broad_fraction: float = 0.0
@@ -326,6 +336,10 @@ class WindowData:
             raise InputError(f"sweep_scenes: expected true or false, got {self.sweep_scenes!r}")
         if self.sweep_scenes and not self.sweep_fraction:
             raise InputError("sweep_scenes: applies to the sweep cells; give sweep_fraction > 0 too")
+        if self.sweep_grid not in SWEEP_GRIDS:
+            raise InputError(f"sweep_grid: expected one of {', '.join(SWEEP_GRIDS)}, got {self.sweep_grid!r}")
+        if self.sweep_grid != "sweeps" and not self.sweep_fraction:
+            raise InputError("sweep_grid: applies to the sweep cells; give sweep_fraction > 0 too")
         if self.sweep_scene_weights is not None:
             w = self.sweep_scene_weights
             if isinstance(w, (str, bytes)) or not hasattr(w, "__len__") or len(w) != 4 or not all(
@@ -407,6 +421,8 @@ class WindowData:
             key["scale_range"] = list(self.scale_range)
         if self.sweep_fraction:  # likewise
             key["sweep_fraction"] = self.sweep_fraction
+        if self.sweep_grid != "sweeps":  # likewise
+            key["sweep_grid"] = self.sweep_grid
         if self.sweep_scenes:  # likewise
             key["sweep_scenes"] = True
         if self.sweep_scene_weights is not None:  # likewise

@@ -48,7 +48,7 @@ from neuspike.scenes.photos import read_photo
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
-from neuspike.train.spec import KIND_WEIGHTS, SWEEP_POINTS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
+from neuspike.train.spec import KIND_WEIGHTS, SWEEP_GRIDS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
@@ -176,7 +176,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         else:
             scene = SceneSpec(kind="still", image=image, size=size)
     if at_sweep:
-        light, motion, noise = SWEEP_POINTS[int(rng.integers(len(SWEEP_POINTS)))]
+        points = SWEEP_GRIDS[data.sweep_grid]
+        light, motion, noise = points[int(rng.integers(len(points)))]
     else:
         lo, hi = data.light_range
         light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))

@@ -970,3 +970,25 @@ def test_the_run_says_where_it_exports_and_that_export_replaces_the_shipped_weig
     assert "best weights are exported to" not in capsys.readouterr().out
     Trainer(tiny_spec(tmp_path, export_dir=str(tmp_path / "out")), quiet=False).run(until=0)
     assert line in capsys.readouterr().out
+
+
+def test_the_light_noise_sweep_grid_draws_the_reports_points_and_leaves_old_keys(tmp_path):
+    """sweep_grid "light-noise": the sweep cells sit on the 24 points where the light x noise report
+    crosses light and noise (every light at every level, S = 128); the default keeps the 12 and the key."""
+    from neuspike.train.spec import LIGHT_NOISE_POINTS, SWEEP_POINTS
+
+    assert len(LIGHT_NOISE_POINTS) == 24 and set(SWEEP_POINTS) < set(LIGHT_NOISE_POINTS)
+    assert {(l, n) for l, _, n in LIGHT_NOISE_POINTS} == {(l, n) for l in {p[0] for p in SWEEP_POINTS}
+                                                          for n in ("none", "small", "medium", "high")}
+    old = tiny_spec(tmp_path, sweep_fraction=1.0)
+    new = tiny_spec(tmp_path, sweep_fraction=1.0, sweep_grid="light-noise")
+    assert "sweep_grid" not in old.data.key(0) and new.data.key(0)["sweep_grid"] == "light-noise"
+    drawn = set()
+    for i in range(200):
+        c = draw_cell(new, "train", i, tmp_path)[1]
+        drawn.add((c.light, c.motion, c.noise))
+    assert drawn <= set(LIGHT_NOISE_POINTS) and len(drawn - set(SWEEP_POINTS)) > 5
+    with pytest.raises(InputError, match="sweep_grid: expected one of"):
+        tiny_spec(tmp_path, sweep_fraction=1.0, sweep_grid="everything")
+    with pytest.raises(InputError, match="give sweep_fraction > 0"):
+        tiny_spec(tmp_path, sweep_grid="light-noise")
