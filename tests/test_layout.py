@@ -100,3 +100,23 @@ def test_bench_has_two_wings_and_its_top_level_holds_commands_only():
         tree = ast.parse(path.read_text())
         assert any(isinstance(n, ast.FunctionDef) and n.name == "main" for n in tree.body), \
             f"bench/{path.name} is not a command (no main): libraries go into bench/harness or bench/reporting"
+
+
+def test_the_condition_axes_are_declared_once():
+    """Titles, labels, scales and the images' folders of the axes come from bench.harness.axes: no other
+    module of bench spells an axis title, nor lists axis names to pick a scale."""
+    import re
+
+    from bench.harness.axes import AXIS
+
+    offenders = []
+    for path in (ROOT / "bench").rglob("*.py"):
+        if path.name == "axes.py":
+            continue
+        text = path.read_text()
+        for a in AXIS.values():
+            if f'"{a.title}"' in text:
+                offenders.append(f"{path.relative_to(ROOT)} spells {a.title!r}")
+        if re.search(r'axis in \("(?:light|motion|noise)", "(?:light|motion|noise)"\)', text):
+            offenders.append(f"{path.relative_to(ROOT)} picks a scale by axis names")
+    assert not offenders, offenders

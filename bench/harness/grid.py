@@ -1,4 +1,4 @@
-"""Sweep grids: the axes of a benchmark, declared once, and the cells they span.
+"""Sweep grids: the presets of a benchmark and the cells they span (the axes: :mod:`bench.harness.axes`).
 
 A grid has five axes: scene, light scale L, motion scale S, noise level and seed. A *cell* is one
 point of it, (scene, condition, seed): one simulated recording that every method of the sweep
@@ -47,6 +47,7 @@ from neuspike.conditions import EVENT_PRESETS, NOISE_LEVELS, Condition, Effect, 
 from neuspike.errors import InputError
 from neuspike.scenes import SceneSpec
 
+
 #: Scene kinds a grid may use (``video`` needs a file and is not part of the presets).
 SCENE_KINDS = ("pan", "zoom", "fan", "still")
 #: The light scales of Figure 3, and the fixed light of Figure 4 and Table 3.
@@ -57,8 +58,6 @@ PAPER_MOTIONS = (16, 32, 64, 128, 256)
 PAPER_FIXED_MOTION = 128
 #: The noise levels of Table 3.
 PAPER_NOISE_LEVELS = ("small", "medium", "high")
-#: The condition axes a grid spans, in the order they are reported.
-AXES = ("light", "motion", "noise")
 #: The presets (:func:`preset`): one per swept axis, and light and noise swept together.
 PRESETS = ("light", "motion", "noise", "light-noise")
 #: The axis along which a preset's reconstructions are kept for the figure grid (its swept axis; the

@@ -4,7 +4,7 @@ Sweeps: ``images/<scene>/<axis>=<value>/<method>.png`` and ``images/<scene>/<axi
 
 * ``<scene>`` is the scene's name (``KIND:IMAGE``) passed through :func:`safe_name` (characters other
   than letters, digits, ``.``, ``_``, ``-`` and ``=`` become ``_``: ``pan:camera`` -> ``pan_camera``);
-* ``<axis>`` is a swept axis of :data:`bench.harness.grid.AXES`; ``<value>`` the axis value as
+* ``<axis>`` is a swept axis of :data:`bench.harness.axes.AXES`; ``<value>`` the axis value as
   ``results.csv`` writes it (``light=0.03125``, ``motion=128``, ``noise=high``);
 * ``<method>`` is the registry name through :func:`safe_name`; ``gt.png`` is the ground truth;
 * each PNG is 8-bit greyscale, ``round(255 * clip(image, 0, 1))``, of one seed (the first).
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.harness.grid import AXES
+from bench.harness.axes import AXIS
 from neuspike.formats.images import write_png
 
 
@@ -33,15 +33,9 @@ def safe_name(name: str) -> str:
 
 def axis_folder(axis: str, value: Any) -> str:
     """``<axis>=<value>``, the value as ``results.csv`` writes it (``light=0.03125``, ``motion=128``)."""
-    if axis not in AXES:
-        raise ValueError(f"axis: expected one of {AXES}, got {axis!r}")
-    if axis == "light":
-        text = repr(float(value))
-    elif axis == "motion":
-        text = str(int(value))
-    else:
-        text = str(value)
-    return safe_name(f"{axis}={text}")
+    if axis not in AXIS:
+        raise ValueError(f"axis: expected one of {tuple(AXIS)}, got {axis!r}")
+    return safe_name(f"{axis}={AXIS[axis].text(value)}")
 
 
 def image_path(images_dir: str | os.PathLike, scene: str, axis: str, value: Any, name: str) -> Path:

@@ -52,6 +52,7 @@ from typing import Any, Iterator
 import pandas as pd
 
 from bench.harness import grid as grids
+from bench.harness.axes import AXES
 from bench.harness.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
 from bench.harness.executors import DaskExecutor, make_executor
 from bench.harness.grid import Grid
@@ -121,8 +122,8 @@ class SweepSpec:
         object.__setattr__(self, "history_windows", hw)
         if self.weights is not None:
             object.__setattr__(self, "weights", str(Path(self.weights).resolve()))
-        if self.axis is not None and self.axis not in grids.AXES:
-            raise InputError(f"axis: expected one of {', '.join(grids.AXES)} or None, got {self.axis!r}")
+        if self.axis is not None and self.axis not in AXES:
+            raise InputError(f"axis: expected one of {', '.join(AXES)} or None, got {self.axis!r}")
         self.grid.check_planes(self.sensor.planes)
 
     def keeps_images(self, cell: grids.Cell) -> bool:

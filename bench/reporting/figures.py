@@ -35,6 +35,7 @@ from matplotlib.table import Table  # noqa: E402
 
 from neuspike.utils.atomic import write_with  # noqa: E402
 from bench.harness.results import tfp_windows  # noqa: E402
+from bench.harness.axes import AXIS  # noqa: E402
 from bench.reporting.tables import (AXIS_TITLES, METRIC_LABELS, axis_label, axis_summary, axis_values, held_conditions,  # noqa: E402
                           method_families, method_order)
 
@@ -86,25 +87,29 @@ def save_png(fig: Figure, path: str | Path, dpi: int = 130) -> Path:
     return write_with(path, lambda f: f.write(data))
 
 
+def _log2(axis: str) -> bool:
+    return axis in AXIS and AXIS[axis].log2
+
+
 def _axis_positions(axis: str, values: Sequence[Any]) -> np.ndarray:
-    if axis in ("light", "motion"):
+    if _log2(axis):
         return np.asarray(values, dtype=np.float64)
     return np.arange(len(values), dtype=np.float64)
 
 
 def _setup_x(ax: Any, axis: str, values: Sequence[Any]) -> None:
     pos = _axis_positions(axis, values)
-    if axis in ("light", "motion"):
+    if _log2(axis):
         ax.set_xscale("log", base=2)
         ax.minorticks_off()
     ax.set_xticks(pos)
     ax.set_xticklabels([axis_label(axis, v) for v in values])
     if len(pos) > 1:
-        if axis in ("light", "motion"):
+        if _log2(axis):
             ax.set_xlim(pos.min() / 2 ** 0.25, pos.max() * 2 ** 0.25)
         else:
             ax.set_xlim(pos.min() - 0.3, pos.max() + 0.3)
-    ax.set_xlabel(AXIS_TITLES.get(axis, axis) + (" (log2 scale)" if axis in ("light", "motion") else ""))
+    ax.set_xlabel(AXIS_TITLES.get(axis, axis) + (" (log2 scale)" if _log2(axis) else ""))
 
 
 def axis_figure(frame: pd.DataFrame, axis: str, metrics: Sequence[str] = ("psnr", "ssim"),
@@ -134,7 +139,7 @@ def axis_figure(frame: pd.DataFrame, axis: str, metrics: Sequence[str] = ("psnr"
             rows = s[s["method"] == m]
             if rows.empty:
                 continue
-            if axis == "noise":
+            if not _log2(axis):  # a categorical axis: its values at their positions
                 x = rows[axis].map({v: i for i, v in enumerate(values)}).to_numpy(dtype=np.float64)
             else:
                 x = rows[axis].to_numpy(dtype=np.float64)

@@ -24,14 +24,13 @@ from __future__ import annotations
 import io
 import math
 import re
-from fractions import Fraction
 from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from bench.harness.cells import METRICS
-from bench.harness.grid import AXES
+from bench.harness.axes import AXES, AXIS
 from bench.harness.results import family_of
 
 METRIC_LABELS: Mapping[str, str] = {
@@ -42,8 +41,6 @@ METRIC_LABELS: Mapping[str, str] = {
 }
 #: Method families, in the order they are listed.
 FAMILIES: tuple[str, ...] = ("spike", "event", "fusion", "unknown")
-#: Order of the noise levels (the paper's Table 3 levels after ``none``).
-NOISE_ORDER: tuple[str, ...] = ("none", "small", "medium", "high")
 #: Table 3 of the paper (NeuSpike-Net, ICCV 2021): noise level -> {method: (PSNR dB, SSIM)}.
 PAPER_TABLE3: Mapping[str, Mapping[str, tuple[float, float]]] = {
     "small": {"E2VID": (14.76, 0.6463), "TFI": (21.76, 0.6911), "NeuSpike-Net": (26.07, 0.8578)},
@@ -117,26 +114,16 @@ def swept_axes(frame: pd.DataFrame) -> list[str]:
 
 
 def axis_values(frame: pd.DataFrame, axis: str) -> list[Any]:
-    """The distinct values of ``axis`` in order (numbers ascending; noise levels by severity)."""
-    values = list(pd.unique(frame[axis].dropna()))
-    if axis == "noise":
-        return sorted(values, key=lambda v: (NOISE_ORDER.index(v) if v in NOISE_ORDER else len(NOISE_ORDER), str(v)))
-    return sorted(values)
+    """The distinct values of ``axis`` in its order (:meth:`bench.harness.axes.Axis.ordered`)."""
+    return AXIS[axis].ordered(pd.unique(frame[axis].dropna()))
 
 
 def axis_label(axis: str, value: Any) -> str:
     """How an axis value is written: ``1/32`` for light, ``128`` for motion, the noise level's name."""
-    if axis == "light":
-        frac = Fraction(float(value)).limit_denominator(4096)
-        if abs(float(frac) - float(value)) <= 1e-12 * max(1.0, abs(float(value))):
-            return str(frac)
-        return f"{float(value):g}"
-    if axis == "motion":
-        return str(int(value))
-    return str(value)
+    return AXIS[axis].label(value) if axis in AXIS else str(value)
 
 
-AXIS_TITLES: Mapping[str, str] = {"light": "light scale L", "motion": "motion scale S", "noise": "noise level"}
+AXIS_TITLES: Mapping[str, str] = {name: a.title for name, a in AXIS.items()}
 
 
 # ----------------------------------------------------------------------------------------------
