@@ -52,7 +52,11 @@ if TYPE_CHECKING:
 
 
 def _load(folder: Path) -> tuple[dict[str, Any], dict[str, Any], pd.DataFrame]:
-    paths = {name: folder / name for name in ("config.json", "metadata.json", "results.csv")}
+    from bench.reporting.build import results_file
+
+    # a committed report keeps its results gzipped (results.csv.gz), which reads as results.csv does
+    paths = {name: folder / name for name in ("config.json", "metadata.json")}
+    paths["results.csv"] = results_file(folder)
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing:
         raise InputError(f"{folder}: not a finished sweep folder (missing {', '.join(missing)})")

@@ -142,7 +142,11 @@ def main(argv: list[str] | None = None) -> int:
     if not folders:
         print("usage: python -m bench.reporting.margins RESULTS_DIR... (each with results.csv or results.csv.gz)", file=sys.stderr)
         return 2
-    sys.stdout.write(margins_markdown(folders))
+    try:
+        sys.stdout.write(margins_markdown(folders))
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

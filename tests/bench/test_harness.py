@@ -464,6 +464,15 @@ def test_merged_sweeps_equal_one_sweep_of_all_methods(plugin, tmp_path):
     merge_sweeps(tmp_path / "z", [tmp_path / "a", tmp_path / "b-gpu"])
     assert json.loads((tmp_path / "z" / "config.json").read_text())["sweep"]["precision"] == {"ht-mean-x2": "bfloat16"}
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    # a committed report keeps its results gzipped: it merges as the folder it was
+    import gzip
+
+    shutil.copytree(tmp_path / "a", tmp_path / "a-committed")
+    raw = (tmp_path / "a-committed" / "results.csv").read_bytes()
+    (tmp_path / "a-committed" / "results.csv.gz").write_bytes(gzip.compress(raw))
+    (tmp_path / "a-committed" / "results.csv").unlink()
+    again = merge_sweeps(tmp_path / "g", [tmp_path / "a-committed", tmp_path / "b"])
+    same_numbers(again, merged)
 
 
 def test_merge_with_replace_takes_a_methods_rows_from_the_last_folder_that_holds_it(plugin, tmp_path):

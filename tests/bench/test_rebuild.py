@@ -106,3 +106,11 @@ def test_list_prints_every_entry_with_its_command(capsys):
         assert entry.folder in out
     assert "python -m bench.sweep --axis light-noise --full" in out
     assert sys.executable not in out
+
+
+def test_margins_of_a_folder_without_results_is_one_line(tmp_path, capsys):
+    from bench.reporting import margins
+
+    assert margins.main([str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "results.csv" in err
