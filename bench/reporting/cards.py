@@ -93,6 +93,10 @@ def card(name: str, root: Path = ROOT) -> str:
         f"**Command:** `python -m neuspike.train {name} --spec spec.json`, the spec written out of the JSON card "
         f"with `python -c \"import json; print(json.dumps(json.load(open('neuspike/trained/{name}.json'))['training']"
         f"['spec']))\" > spec.json`. A run writes into `runs/` only; `--export` replaces this file.",
+        *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`), at commit "
+           f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
+           f".safetensors > start.safetensors` (its card likewise), then point the spec's `init_from` at it."]
+          if isinstance(meta.get("previous"), dict) and meta["previous"].get("commit") else []),
         f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
         f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
         "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`).",
