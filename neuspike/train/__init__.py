@@ -10,7 +10,7 @@ rest.
 * :mod:`neuspike.train.sequences` — sequences of event windows: cells, items with exact flow, the
   shard, batches, the temporal loss, validation;
 * :mod:`neuspike.train.checkpoint` — the run folder: spec file, checkpoint (the earlier trainers'
-  read too), log, exported weights and their card;
+  refused by name), log, exported weights and their card;
 * :mod:`neuspike.train.loop` — the one loop: schedule, steps, validation, export, resume.
 
 This package's ``__init__`` imports nothing heavy (the command's ``--help`` stays fast).

@@ -4,13 +4,12 @@ Everything is written atomically (:mod:`neuspike.utils.atomic`); a killed run le
 or the new one, and the temporaries a kill leaves behind are removed when the run starts again
 (:func:`remove_temporaries`).
 
-* ``spec.json``: :meth:`TrainSpec.as_dict`; a folder holding another run's spec is refused. Spec
-  files of the earlier trainers read through :func:`neuspike.train.spec.spec_from_dict`.
+* ``spec.json``: :meth:`TrainSpec.as_dict`; a folder holding another run's spec is refused, and so is a
+  spec of the earlier trainers (:func:`neuspike.train.spec.spec_from_dict`).
 * ``checkpoint.pt``: ``{"format": 2, "step", "module", "optimizer", "best", "wall_s", "torch_rng"}``,
   every tensor on the CPU whatever device trained, read with ``map_location="cpu"``, so a run
-  resumes on any device. The earlier trainers' checkpoints (``model``/``optim`` with a best PSNR
-  per variant, or ``module``/``optimizer`` with one best record) read through
-  :func:`upgrade_checkpoint`.
+  resumes on any device. The earlier trainers' checkpoints are refused by name
+  (:func:`checked_checkpoint`; commit 61a150f8 still resumes them).
 * ``train_log.csv``: one row per step (``kind`` ``train``) and per validation (``kind`` ``val``),
   columns :data:`LOG_COLUMNS`. On resume the rows after the checkpoint's step are dropped
   (:func:`trim_log`), so the log never repeats a step; an earlier trainer's log is rewritten in these
@@ -39,7 +38,7 @@ from neuspike.train.spec import TrainSpec, load_spec
 __all__ = [
     "CHECKPOINT", "CHECKPOINT_FORMAT", "LOG", "LOG_COLUMNS", "SPEC", "append_log", "check_spec", "read_checkpoint_file",
     "export_weights", "load_checkpoint", "make_card", "remove_temporaries", "save_checkpoint", "trim_log",
-    "upgrade_checkpoint",
+    "checked_checkpoint",
 ]
 
 SPEC, CHECKPOINT, LOG = "spec.json", "checkpoint.pt", "train_log.csv"
@@ -96,35 +95,20 @@ def check_spec(spec: TrainSpec) -> None:
 # --- checkpoints ----------------------------------------------------------------------------------
 
 
-def upgrade_checkpoint(state: Mapping[str, Any], *, score_key: str, variants: Iterable[str]) -> dict[str, Any]:
-    """A checkpoint of any trainer in the current form (``format`` 2).
-
-    * single-window trainer: ``model``, ``optim``, ``best`` = ``{variant: best PSNR}``, ``torch_rng``;
-    * sequence trainer: ``module``, ``optimizer``, ``best`` = ``{"step", "val_ssim", ...}``, ``wall_s``.
-
-    ``best`` becomes ``{variant: {score_key: ..., ...}}`` (the sequence trainer's single network is
-    the variant of ``variants``).
+def checked_checkpoint(state: Mapping[str, Any]) -> dict[str, Any]:
+    """A checkpoint of this trainer (``format`` 2) as a dict.
 
     Raises
     ------
     FormatError
-        When ``state`` is none of these.
+        When ``state`` is not one: a checkpoint of the earlier single-window or sequence trainers (resume
+        those at commit 61a150f8, which still reads them) or something else.
     """
     if state.get("format") == CHECKPOINT_FORMAT:
         return dict(state)
-    if "model" in state and "optim" in state:
-        best = {v: {score_key: float(psnr)} for v, psnr in dict(state.get("best", {})).items()}
-        return {"format": CHECKPOINT_FORMAT, "step": int(state["step"]), "module": state["model"],
-                "optimizer": state["optim"], "best": best, "wall_s": 0.0, "torch_rng": state.get("torch_rng")}
-    if "module" in state and "optimizer" in state:
-        old = dict(state.get("best", {}))
-        best = {}
-        if old.get(score_key, -1.0) > -1.0:  # the sequence trainer's "nothing yet" was val_ssim = -1
-            (variant,) = tuple(variants)
-            best = {variant: old}
-        return {"format": CHECKPOINT_FORMAT, "step": int(state["step"]), "module": state["module"],
-                "optimizer": state["optimizer"], "best": best, "wall_s": float(state.get("wall_s", 0.0)),
-                "torch_rng": state.get("torch_rng")}
+    if ("model" in state and "optim" in state) or ("module" in state and "optimizer" in state):
+        raise FormatError("a checkpoint of an earlier trainer, which this one no longer resumes: resume it at commit "
+                          "61a150f8, or start the run again (a new --out, or init_from its exported weights)")
     raise FormatError(f"not a training checkpoint (keys {sorted(state)})")
 
 
@@ -185,8 +169,8 @@ def read_checkpoint_file(path: str | os.PathLike) -> Any:
     return state
 
 
-def load_checkpoint(out_dir: str | os.PathLike, *, score_key: str, variants: Iterable[str]) -> dict[str, Any] | None:
-    """The run folder's checkpoint in the current form (:func:`upgrade_checkpoint`), or ``None``."""
+def load_checkpoint(out_dir: str | os.PathLike) -> dict[str, Any] | None:
+    """The run folder's checkpoint (:func:`checked_checkpoint`), or ``None``."""
     path = Path(out_dir) / CHECKPOINT
     if not path.exists():
         return None
@@ -194,7 +178,7 @@ def load_checkpoint(out_dir: str | os.PathLike, *, score_key: str, variants: Ite
     if not isinstance(state, dict):
         raise FormatError(f"{path}: not a training checkpoint")
     try:
-        return upgrade_checkpoint(state, score_key=score_key, variants=variants)
+        return checked_checkpoint(state)
     except FormatError as exc:
         raise FormatError(f"{path}: {exc}") from None
 

@@ -206,7 +206,7 @@ class Trainer:
                            wall_s=self.wall_s)
 
     def resume(self) -> bool:
-        state = ck.load_checkpoint(self.out, score_key=self.task.score_key, variants=self.task.variants())
+        state = ck.load_checkpoint(self.out)
         if state is None:
             return False
         # CPU tensors: the module copies them onto its device, the optimiser moves its state to its parameters'

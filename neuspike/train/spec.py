@@ -9,8 +9,8 @@ The data section says what a training item is:
 
 Everything else (optimiser, schedule, validation and checkpoint cadence, device, precision,
 starting weights) is shared. Spec files written by the earlier trainers (the flat single-window
-spec and the sequence spec with ``lr_warmup_steps``) read back through :func:`spec_from_dict` as
-the same run. This module imports nothing heavy (the command's ``--help`` stays fast).
+spec and the sequence spec with ``lr_warmup_steps``) are refused by :func:`spec_from_dict`, naming
+the commit that still reads them: they served only runs that left the tree. This module imports nothing heavy (the command's ``--help`` stays fast).
 """
 
 from __future__ import annotations
@@ -764,10 +764,11 @@ def learning_rate(spec: TrainSpec, step: int) -> float:
     return spec.lr_min + 0.5 * (spec.lr - spec.lr_min) * (1.0 + math.cos(math.pi * frac))
 
 
-# --- reading spec files, the earlier trainers' included -------------------------------------------
+# --- reading spec files ----------------------------------------------------------------------------
 
-_OLD_WINDOW_KEYS = {"shard_dir", "shard_size", "val_size", "view", "light_range", "motions", "noise_levels",
-                    "photos", "workers", "ssim_weight", "ssim_window", "spike_only_fraction"}
+#: Where the readers of the earlier trainers' spec files and checkpoints remain (they served only runs that
+#: left the tree: every shipped card's spec is in the current form).
+EARLIER_TRAINERS_COMMIT = "61a150f8"
 
 
 def _strict(cls: type, data: Mapping[str, Any], where: str) -> Any:
@@ -789,47 +790,23 @@ def _data_section(d: Mapping[str, Any], where: str) -> DataSection:
 
 
 def spec_from_dict(d: Mapping[str, Any], *, where: str = "spec", out_dir: str | None = None) -> TrainSpec:
-    """A :class:`TrainSpec` from its JSON data, or from a spec file of the earlier trainers.
+    """A :class:`TrainSpec` from its JSON data: ``data`` a mapping with ``kind`` (what :meth:`TrainSpec.as_dict`
+    writes, and every shipped card's spec). ``out_dir`` fills the run folder where the data does not name one.
 
-    * the current form: ``data`` is a mapping with ``kind``;
-    * the single-window trainer's flat spec (``shard_dir``, ``shard_size``, ``val_size``, ...):
-      its data fields move into :class:`WindowData`, the optimiser was AdamW;
-    * the sequence trainer's spec (``data`` without ``kind``, ``lr_warmup_steps``, ``train_items``,
-      ...): its counts and loss weights move into :class:`SequenceData`, the optimiser was Adam
-      without weight decay, threads were not part of it. Its fields added later (``lr_min``,
-      ``view``, ``hdr_fraction``, ...) take their defaults.
-
-    ``out_dir`` fills the run folder where the file does not name one (the sequence trainer's).
-    Unknown keys are an error.
+    Raises
+    ------
+    InputError
+        On unknown keys, and on a spec of the earlier single-window or sequence trainers (no ``data.kind``),
+        which this trainer no longer reads: they ran at commit ``61a150f8`` and before.
     """
     d = dict(d)
-    if isinstance(d.get("data"), Mapping) and "kind" in d["data"]:
-        d["data"] = _data_section(d["data"], where)
-        return _strict(TrainSpec, d, where)
-    if isinstance(d.get("data"), Mapping):  # the sequence trainer's spec
-        data = dict(d.pop("data"))
-        for old, new in (("train_items", "train_items"), ("val_items", "val_items"), ("length", "length"),
-                         ("warmup", "warmup_windows"), ("l1", "l1"), ("ssim", "ssim"), ("temporal", "temporal"),
-                         ("occlusion_alpha", "occlusion_alpha")):
-            if old in d:
-                data[new] = d.pop(old)
-        if data.get("view") is not None:
-            data["view"] = tuple(data["view"])
-        seq = _strict(SequenceData, data, f"{where} (data)")
-        if "lr_warmup_steps" in d:
-            d["warmup"] = d.pop("lr_warmup_steps")
-        base = {"optimizer": "adam", "weight_decay": 0.0, "lr_min": None, "threads": None, "warmup": 50,
-                "lr": 2e-4, "steps": 2000, "batch": 4, "crop": 96, "val_every": 100, "checkpoint_every": 25}
-        base.update(d)
-        base.setdefault("out_dir", out_dir or f"runs/{d.get('method')}")
-        base["data"] = seq
-        return _strict(TrainSpec, base, where)
-    data = {k: d.pop(k) for k in list(d) if k in _OLD_WINDOW_KEYS}  # the single-window trainer's flat spec
-    if "shard_size" in data:
-        data["train_items"] = data.pop("shard_size")
-    if "val_size" in data:
-        data["val_items"] = data.pop("val_size")
-    d["data"] = _strict(WindowData, data, f"{where} (data)")
+    if not (isinstance(d.get("data"), Mapping) and "kind" in d["data"]):
+        raise InputError(f"{where}: a spec of an earlier trainer (no data.kind), which this trainer no longer reads; "
+                         f"run it at commit {EARLIER_TRAINERS_COMMIT} (or earlier), or write it in the current form "
+                         "(python -m neuspike.train METHOD --help; a run folder's spec.json shows one)")
+    d["data"] = _data_section(d["data"], where)
+    if "out_dir" not in d and out_dir is not None:
+        d["out_dir"] = out_dir
     return _strict(TrainSpec, d, where)
 
 

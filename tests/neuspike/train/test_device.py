@@ -18,7 +18,7 @@ from neuspike.errors import InputError
 from neuspike.train.__main__ import build_parser, main, spec_from_args
 from neuspike.train.loop import Trainer, train
 from neuspike.train.spec import load_spec, spec_from_dict
-from tests.neuspike.train.test_run_folder import OLD_E2VID, OLD_NSN, _tiny_sequences, _tiny_windows
+from tests.neuspike.train.test_run_folder import _tiny_sequences, _tiny_windows
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="torch sees no CUDA device")
@@ -44,8 +44,6 @@ def test_spec_files_without_a_device_mean_the_cpu(tmp_path):
     current = _tiny_sequences(tmp_path, "run").as_dict()
     del current["device"]
     assert spec_from_dict(current).device == "cpu"
-    assert spec_from_dict(OLD_NSN).device == "cpu"  # the single-window trainer's flat spec
-    assert spec_from_dict(OLD_E2VID, out_dir="runs/e2vid").device == "cpu"  # the sequence trainer's
 
 
 def test_the_command_takes_a_device_also_over_a_spec_file(tmp_path):

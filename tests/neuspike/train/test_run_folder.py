@@ -22,7 +22,7 @@ from neuspike.errors import FormatError, InputError
 from neuspike.train import checkpoint as ck
 from neuspike.train.__main__ import build_parser, main, spec_from_args
 from neuspike.train.loop import Trainer, train
-from neuspike.train.spec import NOISE_LEVELS, SequenceData, TrainSpec, WindowData, load_spec, spec_from_dict
+from neuspike.train.spec import NOISE_LEVELS, SequenceData, TrainSpec, WindowData, spec_from_dict
 
 ROOT = Path(__file__).resolve().parents[3]
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -66,35 +66,23 @@ def test_range_flags_set_the_window_ranges_and_refuse_anything_but_two_numbers()
             _args(f"neuspike-net {flag} {bad}")
 
 
-def test_old_spec_files_are_the_runs_the_new_command_makes():
-    """A folder of either earlier trainer resumes under python -m neuspike.train with the same flags."""
-    old = spec_from_dict(OLD_E2VID, out_dir="runs/e2vid")
-    assert old.kind == "sequences" and old.optimizer == "adam" and old.warmup == 50 and old.data.warmup_windows == 2
-    assert old.identity() == _args("e2vid --train-items 166 --threads 1").identity()
-    assert old.data.key() == "f40df6737f28"
-    nsn = spec_from_dict(OLD_NSN)
-    line = ("neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 --val-windows 32 --val-every 200 --lr 1e-3 "
-            "--warmup 100 --spike-only-fraction 0.3 --threads 1 --export")
-    assert nsn.identity() == _args(line).identity() and nsn.data.train_items == 2000
-    firenet = dict(OLD_E2VID, method="firenet-sim", lr=0.001, crop=64, length=8, steps=3000, checkpoint_every=25,
-                   precision="float32")
-    assert spec_from_dict(firenet).identity() == _args("firenet-sim --train-items 166 --threads 1").identity()
-    # a spec frozen before lr_min, view and hdr_fraction existed reads with their defaults: a constant rate
-    older = {k: v for k, v in OLD_E2VID.items() if k != "lr_min"}
-    older["data"] = {k: v for k, v in OLD_E2VID["data"].items() if k not in ("view", "hdr_fraction")}
-    assert spec_from_dict(older, out_dir="runs/e2vid") == old
-    for stage in ("spec_stage2.json", "spec_stage3.json"):
-        path = ROOT / "reports" / "neuspike-net" / stage
-        if path.is_file():
-            assert load_spec(path).data.train_items == 2000
+def test_specs_of_the_earlier_trainers_are_refused_by_name_and_the_current_form_round_trips(tmp_path):
+    """The earlier single-window and sequence trainers' spec files served only runs that left the tree; they are
+    refused naming the commit that still reads them. The current form (what a run folder and a card hold)
+    round-trips, and unknown keys are refused."""
+    for old in (OLD_E2VID, OLD_NSN):
+        with pytest.raises(InputError, match="earlier trainer.*61a150f8"):
+            spec_from_dict(old, out_dir="runs/x")
+    current = _tiny_sequences(tmp_path, "run")
+    assert spec_from_dict(json.loads(json.dumps(current.as_dict()))) == current
+    without_folder = {k: v for k, v in current.as_dict().items() if k != "out_dir"}
+    assert spec_from_dict(without_folder, out_dir="runs/y").out_dir == "runs/y"
     with pytest.raises(InputError, match="unknown spec keys"):
-        spec_from_dict({**OLD_NSN, "colour": 1})
-    # the current form round-trips
-    assert spec_from_dict(json.loads(json.dumps(old.as_dict()))) == old
+        spec_from_dict({**current.as_dict(), "colour": 1})
 
 
 def test_the_shipped_cards_specs_read_as_specs_of_this_trainer():
-    """The specs inside the shipped weights' cards (both earlier trainers' forms) are runs of this one."""
+    """The specs inside the shipped weights' cards are runs of this trainer (the current form)."""
     from neuspike.methods.weights import PACKAGE_WEIGHTS
 
     kinds = {}
@@ -183,16 +171,16 @@ def _old_sequence_folder(spec: TrainSpec) -> None:
         w.writerow({"step": 3, "loss": 9.0})  # logged, then killed before the checkpoint
 
 
-@pytest.mark.parametrize("make,old", [(_tiny_windows, _old_window_folder), (_tiny_sequences, _old_sequence_folder)])
-def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights(tmp_path, make, old):
-    """Kill after step 2 (in-process), rewrite the folder as the earlier trainer left it, add the
-    temporaries a kill mid-write leaves and a log row past the checkpoint; the rerun ends with the
-    straight run's weights, no temporaries and a log without repeated steps."""
+@pytest.mark.parametrize("make", [_tiny_windows, _tiny_sequences])
+def test_a_killed_run_resumes_to_the_straight_runs_weights(tmp_path, make):
+    """Kill after step 2 (in-process), add the temporaries a kill mid-write leaves and a log row past the
+    checkpoint; the rerun ends with the straight run's weights, no temporaries and a log without repeated steps."""
     straight = train(make(tmp_path, "a"), quiet=True)
     spec = make(tmp_path, "b")
     assert train(spec, quiet=True, until=2)["step"] == 2
-    old(spec)
     out = Path(spec.out_dir)
+    with open(out / "train_log.csv", "a", newline="") as f:  # logged, then killed before the checkpoint
+        csv.writer(f).writerow(["3", "train", "fusion", "9.0"])
     stale = [out / ".checkpoint.pt.x1y2.tmp", out / ".spec.json.z3w4.tmp", out / ".train_log.csv.q5.tmp"]
     for p in stale:
         p.write_bytes(b"half-written")
@@ -210,6 +198,18 @@ def test_a_killed_run_of_an_earlier_trainer_resumes_to_the_straight_runs_weights
     assert "9.0" not in {r["loss"] for r in rows}
 
 
+@pytest.mark.parametrize("make,old", [(_tiny_windows, _old_window_folder), (_tiny_sequences, _old_sequence_folder)])
+def test_a_folder_of_an_earlier_trainer_is_refused_naming_where_it_resumes(tmp_path, make, old):
+    spec = make(tmp_path, "b")
+    assert train(spec, quiet=True, until=2)["step"] == 2
+    old(spec)
+    with pytest.raises(InputError, match="earlier trainer.*61a150f8"):  # its spec.json
+        train(spec, quiet=True)
+    (Path(spec.out_dir) / "spec.json").write_text(json.dumps(spec.as_dict()))  # a current spec, the old checkpoint
+    with pytest.raises(FormatError, match="earlier trainer.*61a150f8"):
+        train(spec, quiet=True)
+
+
 def test_temporaries_of_a_shared_folder_go_only_when_long_dead(tmp_path):
     dead, live, kept = tmp_path / ".000001.npz.ab.tmp", tmp_path / ".000002.npz.cd.tmp", tmp_path / "000000.npz"
     for p in (dead, live, kept):
@@ -222,10 +222,10 @@ def test_temporaries_of_a_shared_folder_go_only_when_long_dead(tmp_path):
 
 def test_an_unknown_checkpoint_is_a_format_error(tmp_path):
     with pytest.raises(FormatError, match="not a training checkpoint"):
-        ck.upgrade_checkpoint({"weights": 1}, score_key="val_psnr", variants=["single"])
+        ck.checked_checkpoint({"weights": 1})
     (tmp_path / "checkpoint.pt").write_bytes(b"not torch")
     with pytest.raises(FormatError, match="checkpoint"):
-        ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+        ck.load_checkpoint(tmp_path)
 
 
 def test_a_method_of_the_wrong_data_kind_is_refused(tmp_path):
@@ -339,7 +339,7 @@ def test_a_checkpoint_damaged_after_it_was_written_is_refused_not_resumed(tmp_pa
     optimizer = torch.optim.Adam(module.parameters())
     ck.save_checkpoint(tmp_path, step=7, module=module, optimizer=optimizer, best={}, wall_s=1.0)
     path = tmp_path / "checkpoint.pt"
-    state = ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+    state = ck.load_checkpoint(tmp_path)
     assert state["step"] == 7 and torch.equal(state["module"]["weight"], module.weight.detach())
     outer = torch.load(path, weights_only=True)
     data = bytearray(outer["sealed"])
@@ -348,6 +348,6 @@ def test_a_checkpoint_damaged_after_it_was_written_is_refused_not_resumed(tmp_pa
     torch.save({"sealed": bytes(data), "sha256": outer["sha256"]}, buf)
     path.write_bytes(buf.getvalue())
     with pytest.raises(FormatError, match="damaged"):
-        ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])
+        ck.load_checkpoint(tmp_path)
     path.write_bytes(outer["sealed"])  # the form written before checkpoints were sealed
-    assert ck.load_checkpoint(tmp_path, score_key="val_psnr", variants=["single"])["step"] == 7
+    assert ck.load_checkpoint(tmp_path)["step"] == 7
