@@ -74,9 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m neuspike.train", description=DESCRIPTION, epilog=EPILOG,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("method", help="registered learned method (neuspike-net, e2vid, firenet-sim, ...)")
-    p.add_argument("--spec", help="run this spec.json (a run folder's, a campaign's, or one written out of a card) as written: beside it only "
-                                  "--out, --device, --threads, --shard, --workers, --export, --no-export, --export-dir "
-                                  "and the run options apply; a flag that would change what it trains is refused")
+    p.add_argument("--spec", help="run this spec.json (a run folder's, a campaign's, or one written out of a card) as "
+                                  "written: beside it only --set, --out, --device, --threads, --shard, --workers, "
+                                  "--export, --no-export, --export-dir and the run options apply; a flag that would "
+                                  "change what it trains is refused (change a field with --set instead)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="settings",
                    help="set a field of the spec (of --spec's file, or of the one the flags make), checked as a spec "
                         "file is; KEY dotted into a section, VALUE JSON or text, repeatable: --set lr=1e-4 "
