@@ -18,7 +18,7 @@ from bench.reporting import tables as tb
 from bench.harness.results import base_row, rows_frame, to_csv_text
 from neuspike import methods as registry
 from neuspike.errors import InputError
-from neuspike.methods import Method, MethodUnavailable
+from tests.doubles import Failing, MeanRate, Unavailable
 from neuspike.sample import Sample
 from neuspike.streams import SpikeStream
 
@@ -115,31 +115,6 @@ def test_cut_spike_window_keeps_the_planes_around_the_key_plane():
 # ----------------------------------------------------------------------------------------------
 # Table 2 rows with methods that work, fail and are unavailable
 # ----------------------------------------------------------------------------------------------
-
-class MeanRate(Method):
-    inputs = frozenset({"spikes"})
-
-    def _reconstruct(self, sample):
-        s = sample.spikes
-        return np.clip(s.planes.mean(axis=0) / s.gain, 0, 1).astype(np.float32), "gain"
-
-
-class Failing(Method):
-    inputs = frozenset({"spikes"})
-
-    def _reconstruct(self, sample):
-        raise RuntimeError("deliberate failure")
-
-
-class Unavailable(Method):
-    inputs = frozenset({"events"})
-
-    def __init__(self, name=None, **params):
-        raise MethodUnavailable("weights not given (test)")
-
-    def _reconstruct(self, sample):
-        raise AssertionError("never called")
-
 
 NAMES = {"tt-mean": MeanRate, "tt-fail": Failing, "tt-unavailable": Unavailable}
 

@@ -14,7 +14,7 @@ import pytest
 
 from bench.harness.executors import PARENT_CHECK_S
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 SCRIPT = textwrap.dedent('''
     import os, sys, time

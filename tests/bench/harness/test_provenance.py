@@ -27,7 +27,7 @@ def test_the_command_names_the_module_and_no_absolute_path(tmp_path):
     code = ("import json, sys; from bench.harness.provenance import command_line; print(json.dumps(command_line()))")
     module = tmp_path / "probe_cmd.py"
     module.write_text(code)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[2]), str(tmp_path)])}
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).resolve().parents[3]), str(tmp_path)])}
     out = subprocess.run([sys.executable, "-m", "probe_cmd", "--out", str(tmp_path / "runs"),
                           f"--weights={tmp_path / 'w'}", "--seeds", "0,1"],
                          capture_output=True, text=True, cwd=tmp_path, env=env, check=True).stdout

@@ -17,7 +17,7 @@ from neuspike import methods as registry
 from neuspike.errors import InputError
 from neuspike.methods import Method, MethodUnavailable, create_many
 from neuspike.simulation.recording import SensorConfig
-from tests.bench.test_timing import Unavailable
+from tests.doubles import Unavailable
 
 NAME = "zz-learned"
 BUILT: list[str] = []
