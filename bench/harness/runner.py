@@ -13,7 +13,7 @@ of real recordings), and writes into its output folder:
 ``results.csv``     every row (:mod:`bench.harness.results`), assembled from the parts, sorted
 ``errors/<cell>.txt`` tracebacks of the failures of a cell, when any
 ``images/``         reconstructions and ground truth for the report's figure grid, in the layout
-                    of :mod:`bench.reporting.build` (``images/<scene>/<axis>=<value>/<method>.png``): for the
+                    of :mod:`bench.harness.images` (``images/<scene>/<axis>=<value>/<method>.png``): for the
                     swept axis, of the first seed with the other axes at their first value
 ``cache/``          simulated recordings (:mod:`neuspike.simulation.cache`), unless ``--cache`` points elsewhere:
                     one file per modality, so a method added to a finished sweep simulates nothing
@@ -180,8 +180,12 @@ class Execution:
         The precision of every learned method (``"auto"``, ``"float32"`` or ``"bfloat16"``); ``None``
         keeps each method's own (``"auto"``). Like the device, what it resolves to is part of the
         sweep's identity.
-    allow_failures, force, retry_failed, progress, report :
+    allow_failures, force, retry_failed, progress :
         See the command line's help. ``progress=None`` shows the bar only on a terminal.
+    report :
+        Whether the command builds the report after the run (the harness itself never does: it writes the
+        results and the images; :func:`bench.reporting.build.report_after_run` records the report on the
+        outcome).
     """
 
     executor: Any = "local"
