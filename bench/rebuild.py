@@ -140,10 +140,8 @@ def rebuild_summary(reports: Path) -> None:
         out = reports / "summary"
         _replace_tree(work / "tables", out / "tables")
         (out / "figures").mkdir(parents=True, exist_ok=True)
-        for name in ("accuracy_vs_time.png", *(p.name for p in (work / "figures").glob("*.png"))):
-            src = work / "figures" / name
-            if src.is_file():
-                shutil.copy(src, out / "figures" / name)
+        for src in (work / "figures").glob("*.png"):  # accuracy_vs_time.png is tracked; git ignores the rest
+            shutil.copy(src, out / "figures" / src.name)
         if (work / "report.pdf").is_file():
             shutil.copy(work / "report.pdf", out / "report.pdf")
 
@@ -153,14 +151,12 @@ def rebuild_timing(folder: Path, reports: Path) -> None:
     import pandas as pd
 
     from bench.reporting import tables as tb
-    from bench.reporting.build import build_report, read_results
     from bench.reporting.accuracy import join_accuracy
+    from bench.reporting.build import build_report, read_results, results_file
     from neuspike.utils.atomic import write_text
 
     if folder.name == "timing":
         light = reports / "light"
-        from bench.reporting.build import results_file
-
         joined = join_accuracy(read_results(results_file(light)), pd.read_csv(folder / "timing.csv"), "reports/light")
         write_text(folder / "accuracy_vs_time.csv", tb.to_csv_text(joined))
     build_report(folder)
