@@ -32,7 +32,7 @@ The weights come from the user: a folder passed as ``weights_dir`` (the commands
 or their ``NEUSPIKE_WEIGHTS`` variable), declared in the registry entry (its :class:`~neuspike.methods.WeightsConfig`, sub-folder
 ``firenet``) and resolved by :func:`neuspike.methods.weights.resolve_weights`: the file is looked up as
 ``<dir>/firenet/<file>`` and then ``<dir>/<file>``, so either the weights root or the FireNet folder itself may be named. When no
-folder is given or the file is not there, constructing the method raises
+folder is given or the file is not there, creating the method (:func:`neuspike.methods.create`) raises
 :class:`~neuspike.methods.weights.WeightsNotFound` (a :class:`~neuspike.methods.MethodUnavailable`) naming
 every path tried; the harness records the reason and skips the method.
 
@@ -249,14 +249,10 @@ class FireNet(LearnedMethod):
         completed since the previous one, and a frame that completes none repeats the last image
         at no network cost. A fresh reconstruction is the same either way (its last window ends at
         the key instant).
-    weights_file, weights_dir, device, precision
-        As for every :class:`~neuspike.methods.learned.LearnedMethod`; ``weights_file`` is
-        ``"firenet.pt"`` or ``"firenet_plus.pt"`` (published, ``.pt``).
-
-    Raises
-    ------
-    neuspike.methods.weights.WeightsNotFound
-        When the weights cannot be found.
+    device, precision, compiled
+        As for every :class:`~neuspike.methods.learned.LearnedMethod`. The module is untrained until
+        :meth:`load_file` loads ``firenet.pt`` or ``firenet_plus.pt`` (published, ``.pt``) or our own
+        ``.safetensors`` into it: :func:`neuspike.methods.create` does, from the registry entry.
     """
 
     inputs = frozenset({"events"})
@@ -284,10 +280,10 @@ class FireNet(LearnedMethod):
     def build_module(self) -> nn.Module:
         return FireNetModule()
 
-    def load_weights(self, module: nn.Module, path: Path) -> str:
+    def load_weights(self, module: nn.Module, path: Path, *, may_lack: tuple[str, ...] = ()) -> str:
         """Our own safetensors (``"safetensors"``), or a published ``.pt`` in either layout (``"legacy"``, ``"plus"``)."""
         if path.suffix == ".safetensors":  # our own (firenet-sim), in the module's own names
-            return super().load_weights(module, path)
+            return super().load_weights(module, path, may_lack=may_lack)
         mapped, layout = map_state_dict(load_torch_state(path))
         load_state_strict(module, mapped, f"{path} ({layout} layout)")
         return layout
@@ -329,14 +325,6 @@ class FireNet(LearnedMethod):
     def _state_hw(self) -> tuple[int, int]:
         """(H, W) of the sequence the recurrent state belongs to."""
         return tuple(self._state[0].shape[2:])
-
-    @classmethod
-    def for_training(cls, name: str | None = None, **params: Any) -> "FireNet":
-        """The method around a fresh module (the base's), in torch's default memory layout: training
-        runs there, inference in channels-last."""
-        method = super().for_training(name, **params)
-        method.module = method.module.to(memory_format=torch.contiguous_format)
-        return method
 
     def windows(self, sample: Sample) -> list[tuple[int, int, float, float]]:
         """The fixed-count windows :meth:`encode` steps through, as :func:`event_windows` gives them."""

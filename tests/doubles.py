@@ -37,3 +37,19 @@ class Unavailable(Method):
 
     def _reconstruct(self, sample):
         raise AssertionError("never called")
+
+
+class WithWeights(Method):
+    """Base of doubles whose registry entry declares weights: built with a ``device``, then handed the
+    file :func:`neuspike.methods.create` resolved (recorded as a learned method records it)."""
+
+    def __init__(self, name=None, *, device="cpu", **params):
+        super().__init__(name, device=device, **params)
+        self.weights_path = None
+
+    def load_file(self, path):
+        from pathlib import Path
+
+        self.weights_path = Path(path)
+        self.params["weights_file"] = self.weights_path.name
+        return self

@@ -3,17 +3,19 @@
 A learned method is a :class:`~neuspike.methods.Method` whose image comes from a torch module. The
 base owns what all of them share, written once:
 
-* **weights**: the registry entry carries the weights configuration
-  (:class:`neuspike.methods.WeightsConfig`: the file's name and the sub-folders of a user's folder
-  to look in); :func:`neuspike.methods.create` passes it with the user's ``weights_dir`` and the
-  file is found by :func:`neuspike.methods.weights.resolve_weights` (the user's folder first, then the
-  weights shipped in the package). The constructor builds the module first
-  (:meth:`LearnedMethod.build_module`, from the parameters alone), then loads the file into it
-  (:meth:`LearnedMethod.load_weights`, a function of the module and the path that returns the
-  layout it read), so no subclass has to prepare attributes before the base's ``__init__``.
-  Loading is strict (:func:`neuspike.methods.weights.load_state_strict`); a file whose sha256 differs from
-  its card's is warned about (:func:`neuspike.methods.weights.check_card`). Our own weights are
-  safetensors, published ``.pt`` files are read weights-only by the subclass that needs them.
+* **weights**: the constructor builds an *untrained* module from the parameters alone
+  (:meth:`LearnedMethod.build_module`); a file is loaded into it afterwards by
+  :meth:`LearnedMethod.load_file`, the one loader. The method never finds its own file: the registry
+  entry carries the weights configuration (:class:`neuspike.methods.WeightsConfig`: the file's name
+  and the sub-folders of a user's folder to look in), and :func:`neuspike.methods.create` resolves
+  it (:func:`neuspike.methods.weights.resolve_weights`: the user's folder first, then the weights
+  shipped in the package), builds the method, then loads the file (timm's split of builder and
+  pretrained configuration). Training asks :func:`~neuspike.methods.create` for the untrained method
+  (``trained=False``) and starts from earlier weights through the same :meth:`LearnedMethod.load_file`.
+  Loading is strict (:func:`neuspike.methods.weights.load_state_strict`); a file whose sha256 differs
+  from its card's is warned about (:func:`neuspike.methods.weights.check_card`). Our own weights are
+  safetensors; published ``.pt`` files are read weights-only by the subclass that needs them (its
+  :meth:`LearnedMethod.load_weights`).
 * **device**: ``"cpu"`` by default; any torch device string the machine has (``"cuda"``,
   ``"cuda:1"``) when asked for. Nothing is ever placed on a GPU unasked.
 * **precision**: ``"auto"`` is float32 where the device cannot compute bfloat16 natively (a CPU
@@ -40,8 +42,8 @@ base owns what all of them share, written once:
   :meth:`LearnedMethod.to_image` (default: clamp), and its label goes to ``last_normalisation``.
 
 Subclasses implement :meth:`build_module` and :meth:`encode`, and may override :meth:`load_weights`
-and :meth:`to_image`. The same two give training (:mod:`neuspike.train`): :meth:`for_training`
-builds the method around a fresh module, and the trainer feeds it what :meth:`encode` returns.
+and :meth:`to_image`. The same two give training (:mod:`neuspike.train`): the trainer creates the
+untrained method and feeds its module what :meth:`encode` returns.
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ from neuspike.errors import InputError
 from neuspike.methods import Method
 from neuspike.sample import Sample
 from neuspike.methods.precision import PRECISIONS
-from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict, resolve_weights
+from neuspike.methods.weights import check_card, file_sha256, load_safetensors, load_state_strict
 
 __all__ = ["PRECISIONS", "LearnedMethod", "native_bfloat16", "resolve_device", "resolve_precision", "synchronize"]
 
@@ -135,13 +137,6 @@ class LearnedMethod(Method):
     ----------
     name : str or None
         The registered name.
-    weights_file : str or None
-        File name of the weights (declared by the registry entry); ``None`` builds an untrained
-        module (:meth:`for_training`).
-    weights_dir : path or None
-        Folder the user named; ``None`` looks only at the weights shipped in the package.
-    weights_subdirs : sequence of str
-        Sub-folders of ``weights_dir`` tried first (from the registry entry's weights configuration).
     device : str or torch.device
         Where the module runs (default ``"cpu"``).
     precision : ``"auto"``, ``"float32"`` or ``"bfloat16"``
@@ -153,21 +148,15 @@ class LearnedMethod(Method):
     **params
         The subclass's own parameters (recorded in ``params``).
 
-    Raises
-    ------
-    neuspike.methods.weights.WeightsNotFound
-        When the weights file is not found (a :class:`~neuspike.methods.MethodUnavailable`).
-    neuspike.errors.FormatError
-        When the file does not fit the module (missing, unused or mis-shaped tensors, truncation).
+    The module is untrained until :meth:`load_file` loads a file into it (what
+    :func:`neuspike.methods.create` does with the registry entry's weights).
     """
 
     #: Label of :meth:`to_image`'s read-out.
     output_label: ClassVar[str] = CLAMP
 
-    def __init__(self, name: str | None = None, *, weights_file: str | None = None,
-                 weights_dir: str | os.PathLike | None = None, weights_subdirs: Sequence[str] = (),
-                 device: str | torch.device = "cpu", precision: str = "auto", compiled: bool = False,
-                 **params: Any) -> None:
+    def __init__(self, name: str | None = None, *, device: str | torch.device = "cpu", precision: str = "auto",
+                 compiled: bool = False, **params: Any) -> None:
         if not isinstance(compiled, bool):
             raise InputError(f"compiled: expected True or False, got {compiled!r}")
         if compiled:  # recorded only when on: an eager method's identity is what it always was
@@ -176,37 +165,47 @@ class LearnedMethod(Method):
         # "auto" resolved to bfloat16 only says the device can compute it: a measured step decides
         measure = precision == "auto" and resolve_precision(precision, dev) == "bfloat16"
         precision = "float32" if measure else resolve_precision(precision, dev)
-        path = None if weights_file is None else resolve_weights(str(weights_file), weights_dir,
-                                                                  subdirs=tuple(weights_subdirs))
-        super().__init__(name, weights_file=weights_file, precision=precision, **params)
+        super().__init__(name, precision=precision, **params)
         #: What a measured "auto" precision rests on (None when it was not measured).
         self.precision_measurement: dict[str, Any] | None = None
         self.device = dev
-        self.weights_path: Path | None = path
+        #: The file :meth:`load_file` loaded (``None`` while untrained), its sha256 and the layout read.
+        self.weights_path: Path | None = None
         self.weights_sha256: str | None = None
-        #: The layout the weights file was read in (``load_weights``' answer; ``None`` without weights).
         self.weights_layout: str | None = None
         self._state: Any = None
         self._compiled: Any = None  # the compiled module, built at the first step (compiled=True)
-        module = self.build_module()  # every attribute above is set: the hooks may use any of them
-        if path is not None:
-            self.weights_sha256 = file_sha256(path)
-            check_card(path, self.weights_sha256)
-            self.weights_layout = self.load_weights(module, path)
-        self.module: nn.Module = module.to(dev).eval()
-        if measure:
+        self.module: nn.Module = self.build_module().to(dev).eval()  # every attribute above is set first
+        if measure:  # a step's time does not depend on the weights' values: measured on the fresh module
             self._measure_precision()
 
-    @classmethod
-    def for_training(cls, name: str | None = None, *, device: str | torch.device = "cpu",
-                     **params: Any) -> "LearnedMethod":
-        """The method around a fresh, untrained module (no weights file): what a trainer encodes and trains.
+    def load_file(self, path: str | os.PathLike, *, may_lack: tuple[str, ...] = ()) -> "LearnedMethod":
+        """Load the weights file ``path`` into the module (strictly, by :meth:`load_weights`) and return the method.
 
-        ``params`` are the registry entry's own; precision is float32 (a trainer chooses its own
-        autocast). The module's initial weights come from torch's global generator (the trainer
-        seeds it). The module is left in eval mode: call ``method.module.train()`` to train it.
+        The one loader of learned weights: :func:`neuspike.methods.create` calls it with the file the
+        registry entry resolves to, the trainer with a spec's ``init_from`` and a teacher's file. Records
+        the file (``weights_path``, ``weights_sha256``, ``weights_layout`` and ``params["weights_file"]``,
+        the file's name, part of a result's identity); a file whose sha256 differs from its card's is
+        warned about. ``may_lack``: name prefixes of tensors the file may leave out
+        (:func:`~neuspike.methods.weights.load_state_strict`; training only).
+
+        Raises
+        ------
+        InputError
+            When ``path`` is not a file.
+        neuspike.errors.FormatError
+            When the file does not fit the module (missing, unused or mis-shaped tensors, truncation).
         """
-        return cls(name, weights_file=None, device=device, precision="float32", **params)
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"weights {path}: no such file")
+        sha = file_sha256(path)
+        check_card(path, sha)
+        self.weights_layout = self.load_weights(self.module, path, may_lack=may_lack)
+        self.weights_path, self.weights_sha256 = path, sha
+        self.params["weights_file"] = path.name
+        self._compiled = None  # a compiled module froze the previous weights as constants
+        return self
 
     def _measure_precision(self) -> None:
         """Set ``params["precision"]`` by timing one step in float32 and in bfloat16
@@ -242,10 +241,10 @@ class LearnedMethod(Method):
     def encode(self, sample: Sample) -> Sequence[tuple[torch.Tensor, ...]]:
         """The module's inputs for ``sample``: a list of steps, each a tuple of (1, C, H, W) CPU tensors."""
 
-    def load_weights(self, module: nn.Module, path: Path) -> str | None:
+    def load_weights(self, module: nn.Module, path: Path, *, may_lack: tuple[str, ...] = ()) -> str | None:
         """Load ``path`` into ``module`` strictly and return the layout read (default: a safetensors
-        file of our own, ``"safetensors"``)."""
-        load_state_strict(module, load_safetensors(path), str(path))
+        file of our own, ``"safetensors"``); called by :meth:`load_file`."""
+        load_state_strict(module, load_safetensors(path), str(path), may_lack=may_lack)
         return "safetensors"
 
     def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:

@@ -10,10 +10,12 @@ and the output and records the label in ``last_normalisation``.
 Variants are registry entries over one implementation: ``register("tfp-w8", TFP, params={"window": 8})``.
 A learned method's entry carries its weights configuration (:class:`WeightsConfig`: the file name
 and the sub-folders of a user's weights folder to look in; ``register(..., weights="x.safetensors")``
-is short for ``weights=WeightsConfig("x.safetensors")``); :func:`create` passes it, the user's
-``weights_dir`` and the ``device`` to the factory (:class:`neuspike.methods.learned.LearnedMethod`), which
-builds the module, then :mod:`neuspike.methods.weights` resolves and loads the file into it. Nothing here
-reads the environment.
+is short for ``weights=WeightsConfig("x.safetensors")``). :func:`create` resolves that file (the user's
+``weights_dir`` first, then the weights shipped in the package:
+:func:`neuspike.methods.weights.resolve_weights`), builds the method with the ``device`` (an untrained
+module, for :class:`neuspike.methods.learned.LearnedMethod`), then hands it the file
+(:meth:`Method.load_file`): a method never finds its own weights, and training asks for the untrained
+method with ``create(name, trained=False)``. Nothing here reads the environment.
 
 One registration contract for everything: a module, an entry point of the group ``neuspike.methods``
 or a ``--plugin`` file provides ``register_methods(register)``, a callable that receives
@@ -70,6 +72,13 @@ class Method(abc.ABC):
 
     def reset(self) -> None:
         """Clear recurrent state (start of a new sequence). Stateless methods do nothing."""
+
+    def load_file(self, path: "str | os.PathLike") -> "Method":
+        """Load the weights file ``path`` (found by :func:`create` from the registry entry) and return
+        the method. Methods whose entry declares weights implement it
+        (:meth:`neuspike.methods.learned.LearnedMethod.load_file` for torch modules); the others have none."""
+        raise NeuSpikeError(f"method {self.name!r} ({type(self).__name__}) has no weights to load; a registry entry "
+                            "that declares weights needs a method that implements load_file(path)")
 
     def parameter_count(self) -> int:
         """Number of learned parameters (0 for classical methods)."""
@@ -246,9 +255,13 @@ def entry(name: str) -> MethodEntry:
         raise InputError(f"unknown method {name!r}; available: {', '.join(sorted(_REGISTRY)) or 'none'}") from None
 
 
-def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: str = "cpu",
+def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: str = "cpu", trained: bool = True,
            **overrides: Any) -> Method:
     """Instantiate a registered method, with optional parameter overrides.
+
+    A method whose entry declares weights is built in three steps: its file is resolved from the entry
+    (before anything is built, so a missing file costs nothing), the method is built with ``device``
+    (an untrained module), then the file is loaded into it (:meth:`Method.load_file`).
 
     Parameters
     ----------
@@ -259,19 +272,32 @@ def create(name: str, *, weights_dir: str | os.PathLike | None = None, device: s
         weights are found without it).
     device : str
         Torch device of a learned method (default ``"cpu"``); classical methods ignore it.
+    trained : bool
+        ``False``: the learned method untrained, no file resolved or loaded (what a trainer trains,
+        and what it initialises from a file through the same :meth:`Method.load_file`).
     **overrides
         Parameters that replace the entry's.
+
+    Raises
+    ------
+    neuspike.methods.weights.WeightsNotFound
+        When the entry's weights file is found neither in ``weights_dir`` nor in the package
+        (a :class:`MethodUnavailable`).
     """
     e = entry(name)
     params = {**e.params, **overrides}
+    path = None
     if e.weights is not None:
-        params.setdefault("weights_file", e.weights.file)
-        params.update(weights_dir=weights_dir, device=device)
-        if e.weights.subdirs:
-            params["weights_subdirs"] = e.weights.subdirs
+        params["device"] = device
+        if trained:
+            from neuspike.methods.weights import resolve_weights
+
+            path = resolve_weights(e.weights.file, weights_dir, subdirs=e.weights.subdirs)
     method = e.factory(name=name, **params)
     if not isinstance(method, Method):
         raise NeuSpikeError(f"factory of {name!r} returned {type(method).__name__}, not a Method")
+    if path is not None:
+        method.load_file(path)
     return method
 
 

@@ -50,6 +50,7 @@ __all__ = [
     "read_card",
     "resolve_weights",
     "save_safetensors",
+    "tensor_names",
     "weights_dir_from_env",
 ]
 
@@ -200,6 +201,23 @@ def load_torch_state(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
         raise FormatError(f"{path}: expected a dictionary of tensors (optionally under 'state_dict')")
     return state
+
+
+def tensor_names(path: str | os.PathLike) -> set[str]:
+    """The names of the tensors in a ``.safetensors`` file (its header only, no tensor is read).
+
+    Raises
+    ------
+    FormatError
+        When the file is not a readable safetensors file.
+    """
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            return set(f.keys())
+    except (SafetensorError, OSError, ValueError) as exc:
+        raise FormatError(f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})") from exc
 
 
 def save_safetensors(module_or_state: nn.Module | Mapping[str, torch.Tensor], path: str | os.PathLike, *,

@@ -1,7 +1,7 @@
 """NeuSpike-Net behind the method interface: ``neuspike-net`` (spikes + events) and ``neuspike-net-spike``.
 
-It trains as every learned method does (:mod:`neuspike.train`): ``for_training()`` builds the
-untrained module (:meth:`NeuSpikeNetMethod.build_module`) and :meth:`NeuSpikeNetMethod.encode`
+It trains as every learned method does (:mod:`neuspike.train`): ``create(name, trained=False)`` builds
+the untrained module (:meth:`NeuSpikeNetMethod.build_module`) and :meth:`NeuSpikeNetMethod.encode`
 turns a sample into the module's input tensors.
 
 The network is trained on spike windows centred on the key instant; a window that was shifted to stay
@@ -290,15 +290,16 @@ class NeuSpikeNetMethod(LearnedMethod):
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         return image, label
 
-    def load_weights(self, module: nn.Module, path: Path) -> str | None:
-        """Our own safetensors, refused when its card says it was trained for another design."""
+    def load_weights(self, module: nn.Module, path: Path, *, may_lack: tuple[str, ...] = ()) -> str | None:
+        """Our own safetensors, refused when its card says it was trained for another design (unless
+        ``may_lack`` names parts a training stage adds to that design: the tensors decide then)."""
         card = read_card(path)
         trained = (card or {}).get("model", {}).get("params")
-        if trained is not None:
+        if trained is not None and not may_lack:
             ours = {k: self.params[k] for k in ARCHITECTURE_PARAMS}
             theirs = {k: trained.get(k, CARD_DEFAULTS.get(k)) for k in ARCHITECTURE_PARAMS}
             ours.update({k: self.params.get(k, v) for k, v in SIZE_DEFAULTS.items()})
             theirs.update({k: trained.get(k, v) for k, v in SIZE_DEFAULTS.items()})
             if ours != theirs:
                 raise FormatError(f"{path}: trained for {theirs}, but this method is {ours}")
-        return super().load_weights(module, path)
+        return super().load_weights(module, path, may_lack=may_lack)

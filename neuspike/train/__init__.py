@@ -1,8 +1,8 @@
 """Training learned methods on simulated data: ``python -m neuspike.train NAME``.
 
-One system for every learned method (:class:`~neuspike.methods.learned.LearnedMethod`): the method offers
-``for_training()`` (a fresh module), ``build_module()`` and ``encode(sample)``; the trainer does the
-rest.
+One system for every learned method (:class:`~neuspike.methods.learned.LearnedMethod`): the trainer asks
+:func:`neuspike.methods.create` for the untrained method (``trained=False``), starts from a file through
+its ``load_file`` (``init_from``), feeds its module what ``encode(sample)`` returns and does the rest.
 
 * :mod:`neuspike.train.spec` — the frozen :class:`TrainSpec` with its data section
   (:class:`WindowData` or :class:`SequenceData`) and the learning-rate schedule;

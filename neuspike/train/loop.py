@@ -1,8 +1,8 @@
 """The training loop, one for every learned method and data kind.
 
 The method named by ``spec.method`` is a registered :class:`~neuspike.methods.learned.LearnedMethod`; the
-trainer builds it with :meth:`~neuspike.methods.learned.LearnedMethod.for_training` (a fresh module from
-``torch.manual_seed(spec.seed)``, no weights file) and reads samples through the method's own
+trainer creates it untrained (:func:`neuspike.methods.create` with ``trained=False``: a fresh module from
+``torch.manual_seed(spec.seed)``, no weights file; ``init_from`` goes through its ``load_file``) and reads samples through the method's own
 :meth:`~neuspike.methods.learned.LearnedMethod.encode`. The data section of the spec picks the task:
 :class:`~neuspike.train.windows.WindowTask` (single windows) or
 :class:`~neuspike.train.sequences.SequenceTask` (sequences, for recurrent methods); the task draws
@@ -81,16 +81,15 @@ class Trainer:
             self.task = SequenceTask(spec, self.method)
         lacked: set[str] = set()  # parameters the starting weights did not have (parts added since)
         if spec.init_from is not None:  # a later stage: start from earlier weights (a checkpoint still wins)
-            from neuspike.methods.weights import load_safetensors, load_state_strict
-
             if not Path(spec.init_from).is_file():
                 raise InputError(f"init_from {spec.init_from}: no such file. The spec continues earlier weights; "
-                                 "put them there first (the network's reports README gives each stage's command, "
-                                 "e.g. a copy of the shipped weights or a file from the git history)")
-            state = load_safetensors(spec.init_from)
-            load_state_strict(self.module, state, spec.init_from,
-                              may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
-            lacked = {n for n, _ in self.module.named_parameters() if n not in state}
+                                 "put them there first (the model card names the file and the commit it comes "
+                                 "from)")
+            from neuspike.methods.weights import tensor_names
+
+            self.method.load_file(spec.init_from, may_lack=getattr(self.module, "STARTS_AS_IDENTITY", ()))
+            held = tensor_names(spec.init_from)
+            lacked = {n for n, _ in self.module.named_parameters() if n not in held}
         named = []
         for n, p in self.module.named_parameters():
             if self.task.held(n):

@@ -12,10 +12,12 @@ __all__ = ["training_method"]
 
 
 def training_method(spec: TrainSpec, device: str | torch.device = "cpu"):
-    """The registered method of ``spec`` built for training (fresh module from ``spec.seed``, no weights),
-    its module on ``device`` (built on the CPU first, so the initial weights do not depend on the device)."""
+    """The registered method of ``spec`` built for training: :func:`neuspike.methods.create` untrained
+    (a fresh module from ``spec.seed``, float32, no weights; a trainer starts from a file through the
+    method's own :meth:`~neuspike.methods.learned.LearnedMethod.load_file`), its module in torch's default
+    memory layout (inference may prefer channels-last; training runs in the default one)."""
     from neuspike.methods.learned import LearnedMethod
-    from neuspike.methods import entry
+    from neuspike.methods import create, entry
 
     e = entry(spec.method)
     if not (isinstance(e.factory, type) and issubclass(e.factory, LearnedMethod)):
@@ -24,4 +26,6 @@ def training_method(spec: TrainSpec, device: str | torch.device = "cpu"):
     if spec.kind != want:
         raise InputError(f"method {spec.method!r} trains on {want}, but the spec's data are {spec.kind}")
     torch.manual_seed(spec.seed)
-    return e.factory.for_training(e.name, device=device, **{**dict(e.params), **spec.params})
+    method = create(e.name, trained=False, device=str(device), precision="float32", **spec.params)
+    method.module = method.module.to(memory_format=torch.contiguous_format)
+    return method

@@ -188,7 +188,7 @@ def simulate_item(method: Any, cell: Cell, data: SequenceData) -> SequenceItem |
     """The sequence of ``data.windows`` full windows ending at the key instant, or ``None`` if the scene gives too few events.
 
     ``method`` is a method object with ``windows(sample)`` and ``encode(sample)`` (the trainer's
-    :meth:`for_training` instance); its ``max_windows`` must be at least ``data.windows + 1``.
+    untrained method); its ``max_windows`` must be at least ``data.windows + 1``.
     """
     k = data.windows
     hw = data.size * data.size

@@ -379,9 +379,8 @@ class WindowTask:
                              f"to score (give a 'support' or 'support-count' head, or weight 0)")
 
     def _teacher(self, path: str) -> torch.nn.Module:
-        """The teacher's module (``spec.teacher``): built from its JSON card's parameters, loaded strictly,
-        held in eval mode without gradient."""
-        from neuspike.methods.weights import load_safetensors, load_state_strict
+        """The teacher's module (``spec.teacher``): created untrained from its JSON card's parameters, the
+        file loaded by the same loader as every learned method's, held in eval mode without gradient."""
 
         weights, card = Path(path), Path(path).with_suffix(".json")
         if not weights.is_file():
@@ -398,9 +397,10 @@ class WindowTask:
         if self.fusion and params.get("spike_only", True):
             raise InputError(f"teacher {path}: a spike-only network cannot teach the fusion network's fusion steps "
                              "(give the full fusion network's weights)")
-        teacher = type(self.method).for_training(self.spec.method, device=self.device, **params)
-        load_state_strict(teacher.module, load_safetensors(str(weights)), str(weights))
-        module = teacher.module.float().eval()
+        from neuspike.methods import create
+
+        teacher = create(self.spec.method, trained=False, device=str(self.device), precision="float32", **params)
+        module = teacher.load_file(weights).module.float().eval()
         for p in module.parameters():
             p.requires_grad_(False)
         return module

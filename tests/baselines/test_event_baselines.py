@@ -29,6 +29,7 @@ from baselines.event_integration import (
     resolve_threshold,
 )
 from neuspike.errors import InputError
+from neuspike.methods.weights import resolve_weights
 from neuspike.metrics import affine_fit
 from neuspike.sample import Sample
 from neuspike.streams import EventStream, SpikeStream
@@ -50,8 +51,7 @@ def local_registry() -> dict:
 
     def register(name, factory, *, params=None, inputs=None, description="", weights=None):
         assert name not in entries
-        given = {"weights_file": weights.file, "weights_subdirs": weights.subdirs} if weights else {}
-        entries[name] = (factory, dict(params or {}, **given))
+        entries[name] = (factory, dict(params or {}), weights)
 
     for module in (event_module, firenet_module, fusion_module):
         module.register_methods(register)
@@ -64,10 +64,12 @@ NETWORKS = ("firenet", "firenet-plus")
 
 
 def create(name: str, **overrides):
-    factory, params = REGISTRY[name]
-    if name in NETWORKS:
-        params = {**params, "weights_dir": WEIGHTS}
-    return factory(name=name, **{**params, **overrides})
+    """As :func:`neuspike.methods.create` does: build, then load the entry's file from the user's folder."""
+    factory, params, weights = REGISTRY[name]
+    method = factory(name=name, **{**params, **overrides})
+    if weights is not None:
+        method.load_file(resolve_weights(weights.file, WEIGHTS, subdirs=weights.subdirs))
+    return method
 
 
 def method_params():

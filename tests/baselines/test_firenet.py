@@ -44,6 +44,11 @@ needs_weights = pytest.mark.skipif(
 PARAMETERS = 37_777
 
 
+def published(file_name: str, **params) -> FireNet:
+    """FireNet built untrained, then the published file loaded into it (what ``create`` does)."""
+    return FireNet(**params).load_file(WEIGHTS / "firenet" / file_name)
+
+
 def checkpoint(name: str) -> dict:
     return torch.load(WEIGHTS / "firenet" / name, map_location="cpu", weights_only=True)
 
@@ -154,7 +159,7 @@ def test_tampered_checkpoints_raise_format_error(tmp_path):
 def test_missing_weights_make_the_method_unavailable(monkeypatch, tmp_path):
     monkeypatch.setenv(WEIGHTS_ENV, str(WEIGHTS))  # library code never reads the environment
     with pytest.raises(WeightsNotFound, match="--weights") as info:
-        FireNet(weights_file="firenet.pt", normalize=True)
+        create("firenet")
     assert isinstance(info.value, MethodUnavailable)
     with pytest.raises(WeightsNotFound, match="not found") as info:
         create("firenet", weights_dir=tmp_path)
@@ -167,13 +172,13 @@ def test_missing_weights_make_the_method_unavailable(monkeypatch, tmp_path):
 def test_weights_are_found_in_the_folder_or_its_firenet_subfolder():
     assert resolve_weights("firenet.pt", WEIGHTS, subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet.pt"
     assert resolve_weights("firenet_plus.pt", WEIGHTS / "firenet", subdirs=("firenet",)) == WEIGHTS / "firenet" / "firenet_plus.pt"
-    assert FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet").parameter_count() == PARAMETERS
+    assert published("firenet.pt", normalize=True).parameter_count() == PARAMETERS
 
 
 def test_invalid_parameters_raise():
     for kwargs in ({"precision": "float16"}, {"normalize": 1}, {"events_per_pixel": 0.0}, {"max_windows": 0}):
         with pytest.raises(InputError):
-            FireNet(**{"weights_file": "firenet.pt", "normalize": True, "weights_dir": "/nonexistent", **kwargs})
+            FireNet(**{"normalize": True, **kwargs})
 
 
 # --- state and windows ---------------------------------------------------------------------------
@@ -181,7 +186,7 @@ def test_invalid_parameters_raise():
 
 @needs_weights
 def test_state_resets_between_sequences():
-    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")
+    method = published("firenet.pt", normalize=True)
     rng = np.random.default_rng(1)
     grids = [random_grid(rng, 20, 24) for _ in range(4)]
     first = [method.step(g) for g in grids]
@@ -210,7 +215,7 @@ def test_event_windows_tile_time_backwards_from_the_end():
 @needs_weights
 def test_reconstruct_uses_fixed_count_windows_up_to_the_key_instant():
     h, w = 20, 30
-    method = FireNet(weights_file="firenet_plus.pt", normalize=False, weights_dir=WEIGHTS / "firenet", max_windows=50)
+    method = published("firenet_plus.pt", normalize=False, max_windows=50)
     rng = np.random.default_rng(2)
     n = 1000
     t = np.sort(rng.uniform(-0.01, 0.002, n))
@@ -240,7 +245,7 @@ def pan_sample():
 @needs_weights
 @pytest.mark.parametrize("file_name, normalize", [("firenet.pt", True), ("firenet_plus.pt", False)])
 def test_after_warm_up_firenet_beats_event_integration(pan_sample, file_name, normalize):
-    method = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS / "firenet")
+    method = published(file_name, normalize=normalize)
     image = method.reconstruct(pan_sample)
     assert method.windows_used == 24  # warmed up on the full 24 windows of history
     baseline = event_module.EventIntegration().reconstruct(pan_sample)
@@ -248,14 +253,14 @@ def test_after_warm_up_firenet_beats_event_integration(pan_sample, file_name, no
     ours, theirs = ssim(image, gt, data_range=1.0), ssim(baseline, gt, data_range=1.0)
     assert ours > theirs + 0.1, (ours, theirs)
     # without warm-up (a single window) it is worse
-    cold = FireNet(weights_file=file_name, normalize=normalize, weights_dir=WEIGHTS / "firenet", max_windows=1)
+    cold = published(file_name, normalize=normalize, max_windows=1)
     assert ssim(cold.reconstruct(pan_sample), gt, data_range=1.0) < ours
 
 
 @needs_weights
 def test_bfloat16_stays_close_to_float32(pan_sample):
-    exact = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet", max_windows=8)
-    fast = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet", max_windows=8,
+    exact = published("firenet.pt", normalize=True, max_windows=8)
+    fast = published("firenet.pt", normalize=True, max_windows=8,
                    precision="bfloat16")
     a, b = exact.reconstruct(pan_sample), fast.reconstruct(pan_sample)
     assert np.abs(a - b).mean() < 0.02
@@ -290,5 +295,5 @@ def test_auto_precision_follows_a_measured_step_and_is_recorded(monkeypatch, tmp
     monkeypatch.setattr(learned, "native_bfloat16", lambda: native)
     answers = iter([100.0, bf16_ms])  # float32 is timed first
     monkeypatch.setattr(precision, "_median_ms", lambda step: next(answers))
-    method = FireNet(weights_file="firenet.pt", normalize=True, weights_dir=WEIGHTS / "firenet")
+    method = published("firenet.pt", normalize=True)
     assert method.params["precision"] == expected

@@ -12,8 +12,9 @@ import pytest
 from neuspike import methods as registry
 from neuspike import metrics
 from neuspike.errors import InputError
-from neuspike.methods import Method
+from neuspike.methods import Method, MethodUnavailable
 from neuspike.reconstruct import ReconstructSpec, _prepare_methods, build_parser, main, spec_from_args
+from tests.doubles import WithWeights
 
 
 def _has(module: str) -> bool:
@@ -49,12 +50,8 @@ class EventsMethod(Method):
         return np.zeros((sample.height, sample.width), np.float32), "none"
 
 
-class WeightsMethod(Method):
+class WeightsMethod(WithWeights):
     inputs = frozenset({"spikes"})
-
-    def __init__(self, name=None, *, weights_file, weights_dir=None, device="cpu"):
-        super().__init__(name, weights_file=weights_file, device=device)
-        self.weights_dir = weights_dir
 
     def _reconstruct(self, sample):
         return np.zeros((sample.height, sample.width), np.float32), "none"
@@ -141,16 +138,19 @@ def test_missing_file_and_usage_errors_exit_2(dummies, tmp_path, capsys):
 
 def test_weights_folder_reaches_only_entries_that_declare_weights(dummies, tmp_path, monkeypatch):
     monkeypatch.delenv("NEUSPIKE_WEIGHTS", raising=False)
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w" / "test.safetensors").write_bytes(b"")
     spec = ReconstructSpec(methods=(WEIGHTS_NAME, SPIKES_NAME), out=tmp_path, spikes=tmp_path / "s.npz",
                            weights=tmp_path / "w")
     with_weights, plain = _prepare_methods(spec)
-    assert with_weights.weights_dir == tmp_path / "w"
+    assert with_weights.weights_path == tmp_path / "w" / "test.safetensors"
     assert with_weights.params == {"weights_file": "test.safetensors", "device": "cpu"}
     assert "weights_dir" not in plain.params and "weights_file" not in plain.params
     # only the command line reads the environment; the library takes the folder as given
+    monkeypatch.setenv("NEUSPIKE_WEIGHTS", str(tmp_path / "w"))
+    with pytest.raises(MethodUnavailable, match="test.safetensors"):
+        _prepare_methods(ReconstructSpec(methods=(WEIGHTS_NAME,), out=tmp_path, spikes=tmp_path / "s.npz"))
     monkeypatch.setenv("NEUSPIKE_WEIGHTS", str(tmp_path / "env"))
-    (no_env,) = _prepare_methods(ReconstructSpec(methods=(WEIGHTS_NAME,), out=tmp_path, spikes=tmp_path / "s.npz"))
-    assert no_env.weights_dir is None
     args = build_parser().parse_args(["--method", WEIGHTS_NAME, "--spikes", "s.npz", "--out", str(tmp_path)])
     with pytest.raises(InputError, match=r"\$NEUSPIKE_WEIGHTS: .* is not a folder"):  # as every command says it
         spec_from_args(args)
@@ -162,8 +162,10 @@ def test_weights_folder_reaches_only_entries_that_declare_weights(dummies, tmp_p
 def test_spike_run_writes_png_and_npy_and_scores_against_gt(dummies, npz_recording, tmp_path, capsys):
     path, gt_path, spk = npz_recording
     out = tmp_path / "out"
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w" / "test.safetensors").write_bytes(b"")
     rc = main(["--method", f"{SPIKES_NAME},{WEIGHTS_NAME}", "--spikes", str(path), "--gt", str(gt_path),
-               "--out", str(out)])
+               "--weights", str(tmp_path / "w"), "--out", str(out)])
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     image = np.load(out / f"{SPIKES_NAME}.npy")

@@ -12,7 +12,7 @@ import torch
 
 from baselines.firenet import FireNet, FireNetModule
 from neuspike.errors import InputError
-from neuspike.methods import WeightsConfig, create, entry, register, unregister
+from neuspike.methods import MethodUnavailable, WeightsConfig, create, entry, register, unregister
 from neuspike.methods.weights import PACKAGE_WEIGHTS, WeightsMismatch, file_sha256, save_safetensors
 
 
@@ -59,18 +59,77 @@ def test_the_entry_carries_the_weights_configuration(tmp_path):
         unregister("test-string-weights")
 
 
-def test_for_training_builds_through_the_constructor_without_weights():
+def test_create_builds_untrained_then_loads_through_the_one_loader():
+    """``create(trained=False)`` is the constructor's fresh module (torch's generator); loading the shipped
+    file into it with ``load_file`` gives what ``create`` gives, identity included."""
     torch.manual_seed(0)
-    fresh = FireNet.for_training("firenet-sim", normalize=True)
+    fresh = create("firenet-sim", trained=False, precision="float32")
     torch.manual_seed(0)
     again = FireNetModule()
-    assert fresh.weights_path is None and fresh.layout is None and fresh.params["precision"] == "float32"
+    assert fresh.weights_path is None and fresh.layout is None and "weights_file" not in fresh.params
     for k, v in again.state_dict().items():
         assert torch.equal(fresh.module.state_dict()[k], v), k
-    assert fresh.module.encoder.weight.is_contiguous()  # training runs in the default memory layout
-    shipped = create("firenet-sim")
-    assert shipped.layout == "safetensors" and shipped.module.encoder.weight.is_contiguous(
-        memory_format=torch.channels_last)
+    shipped = create("firenet-sim", precision="float32")
+    assert shipped.layout == "safetensors" and shipped.params["weights_file"] == "firenet-sim.safetensors"
+    assert shipped.module.encoder.weight.is_contiguous(memory_format=torch.channels_last)
+    assert fresh.load_file(shipped.weights_path) is fresh
+    assert fresh.describe() == shipped.describe()
+    for k, v in shipped.module.state_dict().items():
+        assert torch.equal(fresh.module.state_dict()[k], v), k
+
+
+def test_the_trainer_gets_its_method_from_create_in_the_default_layout():
+    from neuspike.train.method import training_method
+    from neuspike.train.spec import SequenceData, TrainSpec
+
+    spec = TrainSpec(method="firenet-sim", data=SequenceData(size=40, windows=4, length=4, warmup_windows=1),
+                     out_dir="unused", crop=24, batch=1, steps=1, precision="float32", threads=None)
+    method = training_method(spec)
+    torch.manual_seed(spec.seed)
+    assert method.weights_path is None and method.module.encoder.weight.is_contiguous()
+    for k, v in FireNetModule().state_dict().items():  # the seed's fresh module
+        assert torch.equal(method.module.state_dict()[k], v), k
+
+
+def test_a_missing_file_is_refused_before_anything_is_built(tmp_path):
+    built = []
+
+    class Counting(FireNet):
+        def build_module(self):
+            built.append(1)
+            return super().build_module()
+
+    register("test-missing-weights", Counting, params={"normalize": True}, weights="absent.safetensors")
+    try:
+        with pytest.raises(MethodUnavailable, match="absent.safetensors"):
+            create("test-missing-weights", weights_dir=tmp_path)
+        assert built == []
+        assert create("test-missing-weights", trained=False, precision="float32").weights_path is None
+        assert built == [1]
+    finally:
+        unregister("test-missing-weights")
+
+
+def test_an_entry_declaring_weights_needs_a_method_that_loads_them(tmp_path):
+    from neuspike.errors import NeuSpikeError
+    from neuspike.methods import Method
+
+    class NoLoader(Method):
+        inputs = frozenset({"spikes"})
+
+        def __init__(self, name=None, *, device="cpu"):
+            super().__init__(name)
+
+        def _reconstruct(self, sample):
+            raise AssertionError("not called")
+
+    (tmp_path / "w.safetensors").write_bytes(b"")
+    register("test-no-loader", NoLoader, weights="w.safetensors")
+    try:
+        with pytest.raises(NeuSpikeError, match="load_file"):
+            create("test-no-loader", weights_dir=tmp_path)
+    finally:
+        unregister("test-no-loader")
 
 
 class _NotATensor:

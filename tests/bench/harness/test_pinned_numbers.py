@@ -15,7 +15,7 @@ from bench.harness.cells import WorkerSetup
 from bench.harness.results import read_csv
 from bench.harness.runner import Execution, SweepSpec, resolve_methods, run_sweep
 from neuspike import methods as registry
-from neuspike.methods import Method, MethodUnavailable
+from tests.doubles import WithWeights
 from neuspike.simulation.recording import SensorConfig
 
 METHODS = ("tfp-w32", "tfi", "events-integrate", "fusion-complementary")
@@ -68,16 +68,11 @@ def test_small_sweep_reproduces_the_pinned_numbers(tmp_path):
         assert got[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
 
 
-class NeedsWeights(Method):
-    """A recurrent method that exists only when given a weights folder (as FireNet)."""
+class NeedsWeights(WithWeights):
+    """A recurrent method whose weights come only from the user's folder (as FireNet)."""
 
     inputs = frozenset({"events"})
     recurrent = True
-
-    def __init__(self, name=None, *, weights_file, weights_dir=None, device="cpu"):
-        if weights_dir is None:
-            raise MethodUnavailable("no weights folder")
-        super().__init__(name, weights_file=weights_file, device=device)
 
     def _reconstruct(self, sample):
         return np.zeros((sample.height, sample.width), np.float32), "none"
@@ -86,7 +81,8 @@ class NeedsWeights(Method):
 def test_the_weights_folder_reaches_the_resolution_of_the_event_history(tmp_path):
     name = "zz-needs-weights"
     registry.available()
-    registry.register(name, NeedsWeights, weights="w.safetensors")
+    registry.register(name, NeedsWeights, weights="zz-needs-weights.safetensors")
+    (tmp_path / "zz-needs-weights.safetensors").write_bytes(b"")
     try:
         g = grids.preset("light", size=(48, 32), scenes=["pan:camera"], seeds=[0], lights=[1 / 4])
         spec = SweepSpec(name="h", grid=g, methods=(name, "tfi"), sensor=SensorConfig(planes=128),

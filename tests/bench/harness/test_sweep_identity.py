@@ -15,22 +15,22 @@ from bench.sweep import main
 from bench.harness.cells import WorkerSetup
 from neuspike import methods as registry
 from neuspike.errors import InputError
-from neuspike.methods import Method, MethodUnavailable, create_many
+from neuspike.methods import MethodUnavailable, create_many
 from neuspike.simulation.recording import SensorConfig
-from tests.doubles import Unavailable
+from tests.doubles import Unavailable, WithWeights
 
 NAME = "zz-learned"
 BUILT: list[str] = []
 
 
-class FakeLearned(Method):
-    """Takes what a learned method takes (weights, device, precision) and counts its creations."""
+class FakeLearned(WithWeights):
+    """Takes what a learned method takes (device, precision, a weights file) and counts its creations."""
 
     inputs = frozenset({"spikes"})
 
-    def __init__(self, name=None, *, weights_file, weights_dir=None, device="cpu", precision="float32"):
+    def __init__(self, name=None, *, device="cpu", precision="float32"):
         BUILT.append(name)
-        super().__init__(name, weights_file=weights_file, precision=precision)
+        super().__init__(name, precision=precision)
         self.device = device
 
     def _reconstruct(self, sample):
@@ -39,8 +39,14 @@ class FakeLearned(Method):
 
 
 @pytest.fixture
-def learned():
-    """Register ``NAME`` with a precision; the fixture's value re-registers it with another."""
+def learned(tmp_path_factory, monkeypatch):
+    """Register ``NAME`` with a precision, its weights file shipped (in a stand-in for the package's
+    folder); the fixture's value re-registers it with another precision."""
+    from neuspike.methods import weights
+
+    shipped = tmp_path_factory.mktemp("trained")
+    (shipped / "w.safetensors").write_bytes(b"")
+    monkeypatch.setattr(weights, "PACKAGE_WEIGHTS", shipped)
     registry.available()
 
     def register(precision: str) -> None:

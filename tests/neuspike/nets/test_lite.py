@@ -71,7 +71,7 @@ def test_the_method_keeps_full_parameters_as_they_were_and_records_the_lite_ones
     full = create("neuspike-net-spike")
     assert "width" not in full.params and "head_kernel" not in full.params
     params = {k: v for k, v in full.params.items() if k not in ("precision", "weights_file")}
-    lite = NeuSpikeNetMethod.for_training("neuspike-net-spike", **{**params, **LITE_DESIGN})
+    lite = NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **{**params, **LITE_DESIGN})
     assert lite.params["width"] == LITE_DESIGN["width"] and lite.params["head_kernel"] == 1
     assert lite.module.width == LITE_DESIGN["width"]
 
@@ -85,8 +85,8 @@ def test_weights_of_one_size_are_refused_by_a_method_of_another(tmp_path):
 
     full = create("neuspike-net-spike")
     params = {k: v for k, v in full.params.items() if k not in ("precision", "weights_file")}
-    lite = NeuSpikeNetMethod.for_training("neuspike-net-spike", **{**params, **LITE_DESIGN})
+    lite = NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **{**params, **LITE_DESIGN})
     path = tmp_path / "lite.safetensors"
     save_safetensors(lite.module, path, card={"model": {"params": {**params, **LITE_DESIGN}}})
     with pytest.raises(FormatError, match="trained for .*'width': 0.45"):
-        NeuSpikeNetMethod("neuspike-net-spike", weights_file=path.name, weights_dir=tmp_path, **params)
+        NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **params).load_file(path)

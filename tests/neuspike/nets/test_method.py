@@ -111,7 +111,7 @@ def weights_dir(tmp_path):
     torch.manual_seed(0)
     for name in ("neuspike-net", "neuspike-net-spike"):
         params = dict(entry(name).params)  # the registered design (the fusion network's has the motion gate)
-        module = NeuSpikeNetMethod.for_training(name, **params).module
+        module = NeuSpikeNetMethod(name, precision="float32", **params).module
         save_safetensors(module, tmp_path / f"{name}.safetensors", card={"model": {"params": params}})
     return tmp_path
 
@@ -181,7 +181,7 @@ def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
     with pytest.raises(InputError, match="events"):
         method.reconstruct(make_sample(events=False))
     with pytest.raises(InputError, match="no events"):
-        NeuSpikeNetMethod.for_training("neuspike-net", **DEFAULT_DESIGN, spike_only=False).encode(
+        NeuSpikeNetMethod("neuspike-net", precision="float32", **DEFAULT_DESIGN, spike_only=False).encode(
             make_sample(events=False))
     spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
     assert spike.reconstruct(make_sample(events=False)).shape == (H, W)
@@ -189,7 +189,7 @@ def test_a_sample_without_events_is_refused_by_the_fusion_network(weights_dir):
 
 def test_weights_of_the_wrong_shape_are_a_format_error(tmp_path):
     params = dict(entry("neuspike-net").params)
-    state = NeuSpikeNetMethod.for_training("neuspike-net", **params).module.state_dict()
+    state = NeuSpikeNetMethod("neuspike-net", precision="float32", **params).module.state_dict()
     state["predict.weight"] = torch.zeros(1, 10, 3, 3)
     save_safetensors(state, tmp_path / "neuspike-net.safetensors")
     with pytest.raises(FormatError, match="predict.weight"):
@@ -219,7 +219,7 @@ def test_weights_trained_for_another_design_are_refused(weights_dir):
 
 def test_weights_of_another_head_are_refused_and_old_cards_mean_the_tanh_head(tmp_path):
     params = {**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"}
-    module = NeuSpikeNetMethod.for_training("neuspike-net", **params).module
+    module = NeuSpikeNetMethod("neuspike-net", precision="float32", **params).module
     old_card = {k: v for k, v in params.items() if k != "head"}  # a card written before heads and gates existed
     save_safetensors(module, tmp_path / "neuspike-net.safetensors", card={"model": {"params": old_card}})
     old = {"weights_dir": tmp_path, "key_estimates": "none"}  # and no key estimates
@@ -250,11 +250,11 @@ def test_the_quantum_is_the_radiance_of_one_spike_in_a_group():
     counts = rates / q  # each group's spike count
     assert np.allclose(counts, np.round(counts), atol=1e-5) and counts.max() > 1
     design = {**DEFAULT_DESIGN, "spike_only": False}
-    method = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support-count"})
+    method = NeuSpikeNetMethod("neuspike-net", precision="float32", **{**design, "head": "support-count"})
     inputs = method.encode(sample)[0]
     assert len(inputs) == 3 and inputs[-1].shape == (1, 1, H, W)
     assert torch.all(inputs[-1] == torch.tensor(q, dtype=torch.float32))
-    support = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support"})
+    support = NeuSpikeNetMethod("neuspike-net", precision="float32", **{**design, "head": "support"})
     assert len(support.encode(sample)[0]) == 2  # the support head takes none
 
 
@@ -309,15 +309,15 @@ def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_
     assert key.shape == (5, H, W) and np.allclose(key, 0.25 / 0.5)
     assert np.array_equal(key_representation(sample, "isi-sequence", backend="numpy"), key)
     design = {**DEFAULT_DESIGN, "spike_only": False, "head": "support-count", "motion_gate": "stats"}
-    method = NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi-sequence"})
+    method = NeuSpikeNetMethod("neuspike-net", precision="float32", **{**design, "key_estimates": "isi-sequence"})
     spikes = method.encode(sample)[0][0]
     assert spikes.shape == (1, 37, H, W)
     assert torch.equal(spikes[0, :32], torch.from_numpy(spike_representation(sample, "counts_interval")))
     assert torch.equal(spikes[0, 32:], torch.from_numpy(key))
     with pytest.raises(InputError, match="key_estimates"):
-        NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "key_estimates": "isi"})
+        NeuSpikeNetMethod("neuspike-net", precision="float32", **{**design, "key_estimates": "isi"})
     with pytest.raises(InputError, match="support-count"):
-        NeuSpikeNetMethod.for_training("neuspike-net", **{**design, "head": "support", "key_estimates": "isi-sequence"})
+        NeuSpikeNetMethod("neuspike-net", precision="float32", **{**design, "head": "support", "key_estimates": "isi-sequence"})
     for name in ("neuspike-net", "neuspike-net-spike"):  # the shipped weights (stages 25 and 38) use them
         assert create(name).params["key_estimates"] == "isi-sequence"
         with pytest.raises(FormatError, match="key_estimates"):

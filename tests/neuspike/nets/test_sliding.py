@@ -140,7 +140,7 @@ def test_streamed_images_with_key_estimates_equal_single_frame_ones(folder, one_
     from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
 
     design = {**DEFAULT_DESIGN, "spike_only": True, "head": "support-count", "key_estimates": "isi-sequence"}
-    methods = [NeuSpikeNetMethod.for_training("neuspike-net-spike", **design) for _ in range(2)]
+    methods = [NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **design) for _ in range(2)]
     torch.manual_seed(3)
     with torch.no_grad():
         methods[0].module.key_refine.out.weight.normal_(0, 0.2)

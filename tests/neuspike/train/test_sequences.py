@@ -27,10 +27,11 @@ DataSpec = SequenceData
 
 def training_method(name: str):
     """The registered method around a fresh module (what the trainer encodes with)."""
-    from neuspike.methods import entry
+    from neuspike.methods import create
 
-    e = entry(name)
-    return e.factory.for_training(name, **dict(e.params))
+    method = create(name, trained=False, precision="float32")
+    method.module = method.module.to(memory_format=torch.contiguous_format)
+    return method
 
 
 def scene_time(sensor_t_s, condition, sensor):
@@ -155,7 +156,7 @@ def test_loss_falls_on_a_fixed_batch(tiny):
     """A few Adam steps on one batch reduce the sequence loss (FireNet-size module, float32)."""
     _, _, method, item = tiny
     torch.manual_seed(0)
-    module = type(method).for_training("firenet-sim", normalize=True).module.train()
+    module = training_method("firenet-sim").module.train()
     data = DataSpec(size=40, windows=4, length=4, warmup_windows=1)
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
     batch = make_batch(shard, np.random.default_rng(0), batch=1, crop=24, length=4)
@@ -443,7 +444,7 @@ def test_history_term_adds_the_gap_between_a_full_and_a_restarted_pass(tiny):
 
     _, _, method, item = tiny
     torch.manual_seed(0)
-    trained = type(method).for_training("firenet-sim", normalize=True)
+    trained = training_method("firenet-sim")
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
     losses = {}
     for w in (0.0, 2.0):
@@ -473,7 +474,7 @@ def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
 
     _, _, method, item = tiny
     torch.manual_seed(0)
-    trained = type(method).for_training("firenet-sim", normalize=True)
+    trained = training_method("firenet-sim")
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
 
     def task_for(w, net):
@@ -495,7 +496,7 @@ def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
 
     def spread_after_steps(w):
         torch.manual_seed(0)
-        fresh = type(method).for_training("firenet-sim", normalize=True)
+        fresh = training_method("firenet-sim")
         task = task_for(w, fresh)
         opt = torch.optim.Adam(fresh.module.parameters(), lr=1e-3)
         for step in range(5):

@@ -462,7 +462,7 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     _check_loss_weight_field("support_weight")
     from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
 
-    tanh = NeuSpikeNetMethod.for_training("neuspike-net", **{**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"})
+    tanh = NeuSpikeNetMethod("neuspike-net", precision="float32", **{**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"})
     with pytest.raises(InputError, match="support_weight"):
         WindowTask(TrainSpec(data=WindowData(support_weight=0.5)), tanh)
 
