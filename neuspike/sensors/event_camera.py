@@ -82,9 +82,9 @@ from neuspike.utils.checks import check_positive, check_positive_int
 from neuspike.conditions import Effect, declared_stages
 from neuspike.errors import InputError
 from neuspike.utils.parallel import resolve_backend
-from neuspike.sensors.dvs_pixel import (DARK_FLOOR_8BIT, I01_OFFSET, I01_SCALE, REFERENCE_WHITE_8BIT,
-                                        SHOT_NOISE_BRIGHT_FACTOR, log_intensity)
-from neuspike.sensors.event_capture import STAGE_ORDER, Capture
+from neuspike.sensors.dvs_pixel import DARK_FLOOR_8BIT, REFERENCE_WHITE_8BIT, log_intensity
+from neuspike.sensors.event_capture import (STAGE_ORDER, THRESHOLD_FLOOR, Capture, PixelArray, PixelState,
+                                            leak_rates, shot_noise_rates, threshold_mismatch)
 from neuspike.streams import EventStream
 
 __all__ = [
@@ -95,14 +95,7 @@ __all__ = [
     "log_intensity",
 ]
 
-#: Smallest per-pixel contrast threshold after mismatch (log units).
-THRESHOLD_FLOOR = 0.01
-#: Log-normal spread of the per-pixel leak rate, in decades (v2e).
-LEAK_SPREAD_DECADES = 0.1
-
 _RANDOM_STAGES = ("threshold_mismatch", "leak", "shot_noise")
-#: Finest resolution of a crossing time, as a power of two of the sample interval.
-_MAX_FRACTION_BITS = 44
 
 
 class EventCamera:
@@ -135,9 +128,14 @@ class EventCamera:
 
     Notes
     -----
-    State that persists between :meth:`capture` calls: the time of the last sample, the (filtered)
-    log intensity and memorised level of every pixel, and, with ``refractory``, the time of each
-    pixel's last emitted event. :meth:`reset` forgets it; the frozen per-pixel parameters stay.
+    The camera holds two values and the order of the stages; the work is done by
+    :mod:`neuspike.sensors.event_capture` over those values. ``pixels``
+    (:class:`~neuspike.sensors.event_capture.PixelArray`): the frozen per-pixel parameters, drawn at
+    construction. ``state`` (:class:`~neuspike.sensors.event_capture.PixelState`): what persists between
+    :meth:`capture` calls (the time of the last sample, the (filtered) log intensity and memorised level
+    of every pixel, and, with ``refractory``, the time of each pixel's last emitted event); a capture
+    starts from it and replaces it only when it completes. :meth:`reset` forgets it; the frozen
+    per-pixel parameters stay.
     """
 
     def __init__(
@@ -169,82 +167,49 @@ class EventCamera:
             )
         self._rng = rng
         n = self.width * self.height
-        self._n = n
-        # event key layout (int64): [time fraction | pixel index y * W + x | polarity (ON = 1)]
-        self._pix_bits = (2 * n - 1).bit_length()
-        self._fraction_bits = min(_MAX_FRACTION_BITS, 62 - self._pix_bits)
-        if self._fraction_bits < 16:
-            raise InputError(f"EventCamera: sensor {self.width}x{self.height} is too large")
-        self._pix_mask = (1 << self._pix_bits) - 1
-        self._event_lut: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # built on first use
-
-        # Frozen per-pixel parameters, drawn in a fixed order: mismatch (ON, OFF), then leak.
+        # frozen per-pixel parameters, drawn in a fixed order by the stage functions: mismatch (ON, OFF), then leak
         self._setup_seconds: dict[str, float] = {}
         c0 = time.perf_counter()
         if "threshold_mismatch" in self._effects:
-            sigma = self._effects["threshold_mismatch"].param("sigma")
-            on = rng.normal(self.threshold_on, sigma, n)
-            off = rng.normal(self.threshold_off, sigma, n)
-            self._th_on = np.maximum(on, THRESHOLD_FLOOR).astype(np.float32)
-            self._th_off = np.maximum(off, THRESHOLD_FLOOR).astype(np.float32)
+            th_on, th_off = threshold_mismatch(rng, n, self.threshold_on, self.threshold_off,
+                                               self._effects["threshold_mismatch"].param("sigma"))
             self._setup_seconds["threshold_mismatch"] = time.perf_counter() - c0
         else:
-            self._th_on = np.full(n, self.threshold_on, dtype=np.float32)
-            self._th_off = np.full(n, self.threshold_off, dtype=np.float32)
-        self._symmetric = "threshold_mismatch" not in self._effects and self.threshold_on == self.threshold_off
-        self._neg_th_off = -self._th_off
-        # interleaved [off, on] per pixel: threshold of pixel i for polarity p is _th_pair[2 i + p]
-        self._th_pair = np.stack([self._th_off, self._th_on], axis=1).ravel()
-
-        self._leak_per_s: np.ndarray | None = None
+            th_on = np.full(n, self.threshold_on, dtype=np.float32)
+            th_off = np.full(n, self.threshold_off, dtype=np.float32)
+        leak = None
         if "leak" in self._effects:
             c0 = time.perf_counter()
-            rate_hz = self._effects["leak"].param("rate_hz")
-            rates = rate_hz * 10.0 ** (LEAK_SPREAD_DECADES * rng.standard_normal(n))
-            self._leak_per_s = (rates * self._th_on).astype(np.float32)
+            leak = leak_rates(rng, th_on, self._effects["leak"].param("rate_hz"))
             self._setup_seconds["leak"] = time.perf_counter() - c0
-
+        noise = None
         if "shot_noise" in self._effects:
-            rate_hz = self._effects["shot_noise"].param("rate_hz")
-            self._noise_gain = np.stack([
-                self.threshold_off / self._th_off.astype(np.float64),
-                self.threshold_on / self._th_on.astype(np.float64),
-            ])  # (2, n): OFF, ON
-            self._noise_half_rate_hz = 0.5 * rate_hz
-            dark = 1.0 - (1.0 - SHOT_NOISE_BRIGHT_FACTOR) * (I01_OFFSET / I01_SCALE)
-            # bound of one pixel's total (ON + OFF) noise rate, for thinning
-            self._noise_bound_hz = rate_hz * dark * float(self._noise_gain.max())
+            noise = shot_noise_rates(th_on, th_off, self.threshold_on, self.threshold_off,
+                                     self._effects["shot_noise"].param("rate_hz"))
+        #: The frozen per-pixel parameters (:class:`~neuspike.sensors.event_capture.PixelArray`).
+        self.pixels = PixelArray(
+            width=self.width, height=self.height, light=self.light, threshold_on=self.threshold_on,
+            threshold_off=self.threshold_off, th_on=th_on, th_off=th_off, leak_per_s=leak, noise=noise,
+            symmetric="threshold_mismatch" not in self._effects and self.threshold_on == self.threshold_off)
+        if self.pixels.fraction_bits < 16:
+            raise InputError(f"EventCamera: sensor {self.width}x{self.height} is too large")
         self.reset()
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
         """Forget the pixel state (the next frame initialises again); frozen parameters stay."""
-        self._t_last: float | None = None
-        self._sig: np.ndarray | None = None
-        self._mem: np.ndarray | None = None
-        self._last_emit_s: np.ndarray | None = None
-
-    def _luts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """x, y (uint16) and polarity (int8) of each event key ``2 * pixel + ON``."""
-        if self._event_lut is None:
-            key = np.arange(2 * self._n)
-            pix = key >> 1
-            self._event_lut = (
-                (pix % self.width).astype(np.uint16),
-                (pix // self.width).astype(np.uint16),
-                np.where(key & 1, 1, -1).astype(np.int8),
-            )
-        return self._event_lut
+        #: What the next capture continues from (:class:`~neuspike.sensors.event_capture.PixelState`).
+        self.state = PixelState()
 
     @property
     def initialised(self) -> bool:
         """Whether the camera has received its first frame."""
-        return self._t_last is not None
+        return self.state.t_last is not None
 
     @property
     def last_time_s(self) -> float | None:
         """Time of the last sample received, or ``None`` before the first."""
-        return self._t_last
+        return self.state.t_last
 
     @property
     def backend(self) -> str:
@@ -259,12 +224,12 @@ class EventCamera:
     @property
     def theta_on(self) -> np.ndarray:
         """Per-pixel ON thresholds in use, float32 (H, W) (a copy)."""
-        return self._th_on.reshape(self.height, self.width).copy()
+        return self.pixels.th_on.reshape(self.height, self.width).copy()
 
     @property
     def theta_off(self) -> np.ndarray:
         """Per-pixel OFF thresholds in use, float32 (H, W) (a copy)."""
-        return self._th_off.reshape(self.height, self.width).copy()
+        return self.pixels.th_off.reshape(self.height, self.width).copy()
 
     # ---------------------------------------------------------------- capture
     def _check_inputs(self, radiance_frames: Any, times_s: Any) -> tuple[np.ndarray, np.ndarray, float]:
@@ -296,10 +261,11 @@ class EventCamera:
                     f"times_s: expected strictly increasing times; sample {k} at {times[k]!r} s does "
                     f"not follow sample {k - 1} at {times[k - 1]!r} s"
                 )
-        if self._t_last is not None and not times[0] > self._t_last:
+        t_last = self.state.t_last
+        if t_last is not None and not times[0] > t_last:
             raise InputError(
                 f"times_s: the first sample at {times[0]!r} s must follow the previous capture's "
-                f"last sample at {self._t_last!r} s"
+                f"last sample at {t_last!r} s"
             )
         lo, hi = float(frames.min()), float(frames.max())
         if not (np.isfinite(lo) and np.isfinite(hi)):
@@ -338,8 +304,10 @@ class EventCamera:
             A rejected call leaves the camera's state unchanged.
         """
         frames, times, max_radiance = self._check_inputs(radiance_frames, times_s)
-        run = Capture(self, max_radiance, self.threads)
+        run = Capture(self.pixels, self._effects, self._rng, self.state, max_radiance=max_radiance,
+                      threads=self.threads, backend=self._backend, setup_seconds=self._setup_seconds)
         with np.errstate(divide="ignore", invalid="ignore"):
-            run.run(frames.reshape(frames.shape[0], self._n), times)
+            state = run.run(frames.reshape(frames.shape[0], self.pixels.n), times)
+        self.state = state  # only a completed capture moves the camera on
         return run.result()
 

@@ -322,10 +322,10 @@ def test_noise_event_resets_the_memorised_level(monkeypatch):
     theta, start, delta = 0.1, 4.0, 0.55  # crossings at fractions k * theta / delta
     f_noise = 0.3
 
-    def inject(self, radiance, dt):
+    def inject(pixels, rng, radiance, dt, scale8):
         return np.array([0]), np.array([f_noise]), np.array([False])
 
-    monkeypatch.setattr(event_capture.Capture, "draw_shot_noise", inject)
+    monkeypatch.setattr(event_capture, "draw_shot_noise", inject)
     cam = EventCamera(1, 1, light=1.0, threshold_on=theta, threshold_off=theta,
                       effects=(effect("shot_noise", rate_hz=1.0),), rng=np.random.default_rng(0))
     frames = np.array([ln_radiance(start), ln_radiance(start + delta)]).reshape(2, 1, 1)
@@ -372,13 +372,13 @@ def test_noise_resets_match_a_plain_reference(monkeypatch, leak):
     noise = [(0.7, True), (0.2, False), (0.45, True)]  # injected unsorted, three in one pixel
     order = [1, 0, 2]
 
-    def inject(self, radiance, dt):
+    def inject(pixels, rng, radiance, dt, scale8):
         pix = np.array([2, 0, 2, 2, 3])
         frac = np.array([noise[order[0]][0], 0.5, noise[order[1]][0], noise[order[2]][0], 0.05])
         on = np.array([noise[order[0]][1], True, noise[order[1]][1], noise[order[2]][1], False])
         return pix, frac, on
 
-    monkeypatch.setattr(event_capture.Capture, "draw_shot_noise", inject)
+    monkeypatch.setattr(event_capture, "draw_shot_noise", inject)
     effects = (effect("shot_noise", rate_hz=1.0),) + ((effect("leak", rate_hz=30.0),) if leak else ())
     cam = EventCamera(4, 1, light=1.0, threshold_on=0.1, threshold_off=0.15, effects=effects,
                       rng=np.random.default_rng(0))
@@ -388,7 +388,7 @@ def test_noise_resets_match_a_plain_reference(monkeypatch, leak):
     times = np.array([0.0, 0.01, 0.02, 0.05])
     got = cam.capture(frames, times)
     logs = np.log(255.0 * frames.reshape(4, 4).astype(np.float64))
-    drift = (cam._leak_per_s.astype(np.float64) if leak else np.zeros(4))
+    drift = (cam.pixels.leak_per_s.astype(np.float64) if leak else np.zeros(4))
     pixel_noise = {0: [(0.5, True)], 2: noise, 3: [(0.05, False)]}
     for pix in range(4):
         ref = reference_with_resets(logs[:, pix], times, 0.1, 0.15, drift[pix], pixel_noise.get(pix, []))
@@ -411,7 +411,7 @@ def test_leak_gives_on_events_at_about_the_leak_rate():
     # log-normal spread of 0.1 decade: mean rate is rate_hz * exp((0.1 ln 10)^2 / 2) = 1.027 rate_hz
     assert abs(rate - rate_hz) < 0.1 * rate_hz
     # each pixel fires every 1 / rate_pixel seconds (its frozen rate: drift / theta_on)
-    rate_pixel = cam._leak_per_s.astype(np.float64) / cam._th_on
+    rate_pixel = cam.pixels.leak_per_s.astype(np.float64) / cam.pixels.th_on
     counts = np.bincount(pixel_index(s), minlength=2000)
     assert np.abs(counts - np.floor(rate_pixel * duration)).max() <= 1
     assert 0.5 < np.log10(rate_pixel).std() / 0.1 * 2 < 2.5
@@ -496,3 +496,57 @@ def test_bad_capture_input_leaves_state_unchanged():
     assert cam.last_time_s == 1e-3
     after = cam.capture(np.full((1, 3, 4), 0.5 * math.exp(0.3), np.float32), np.array([2e-3]))
     assert len(after) == 12
+
+
+# --------------------------------------------------------------------------- explicit pixel state
+from tests.neuspike.sensors.test_event_kernels import events_of, moving_scene  # noqa: E402
+
+
+def test_a_capture_is_a_function_of_the_frozen_pixels_and_the_carried_state():
+    """The camera's state is a value: handed to a second camera with the same frozen draws, the next
+    capture gives the same events as the first camera's (every stage declared, both backends)."""
+    from neuspike.conditions import EVENT_PRESETS
+
+    effects = EVENT_PRESETS["noisy"] + (effect("refractory", period_s=1e-4),)
+    frames, times = moving_scene(np.random.default_rng(4), k=12)
+    for backend in ("numpy", "numba"):
+        a = EventCamera(frames.shape[2], frames.shape[1], light=0.5, effects=effects,
+                        rng=np.random.default_rng(9), backend=backend)
+        b = EventCamera(frames.shape[2], frames.shape[1], light=0.5, effects=effects,
+                        rng=np.random.default_rng(9), backend=backend)
+        a.capture(frames[:6], times[:6])
+        b.state = a.state.copy()
+        b._rng = np.random.default_rng(1)  # the shot noise of the next capture, drawn alike
+        a._rng = np.random.default_rng(1)
+        first, second = a.capture(frames[6:], times[6:]), b.capture(frames[6:], times[6:])
+        assert len(first) > 50 and events_of(first) == events_of(second)
+        assert a.state.mem.tobytes() == b.state.mem.tobytes()
+
+
+def test_a_rejected_capture_leaves_the_state_as_it_was():
+    frames, times = moving_scene(np.random.default_rng(4), k=8)
+    cam = EventCamera(frames.shape[2], frames.shape[1], light=0.5)
+    cam.capture(frames[:4], times[:4])
+    before = cam.state.copy()
+    with pytest.raises(InputError, match="must follow"):
+        cam.capture(frames[4:], times[:4])
+    assert cam.state.t_last == before.t_last and cam.state.mem.tobytes() == before.mem.tobytes()
+
+
+def test_the_refractory_stage_as_a_function_keeps_events_a_period_after_the_last():
+    """Keys at fractions 0..3 of a 1 s interval (scale 1/4): pixel 0 last fired at t = -0.1 s, pixel 1
+    at 0.4 s; with a period of 0.5 s pixel 0's event at 0.5 s stays, pixel 1's at 0.75 s is dropped."""
+    pix_bits = 2
+    keys = np.array([(2 << pix_bits) | (0 << 1) | 1, (3 << pix_bits) | (1 << 1) | 0], np.int64)
+    last = np.array([-0.1, 0.4])
+    kept, pix = event_capture.refractory_filter(keys, np.array([0, 1]), 0.0, 0.25, pix_bits, last, 0.5)
+    assert kept.tolist() == [keys[0]] and pix.tolist() == [0]
+    assert last.tolist() == [0.5, 0.4]  # the emitted event is the pixel's new last
+
+
+def test_threshold_mismatch_is_floored_and_drawn_on_first():
+    on, off = event_capture.threshold_mismatch(np.random.default_rng(0), 1000, 0.2, 0.3, 0.5)
+    rng = np.random.default_rng(0)
+    expect_on = np.maximum(rng.normal(0.2, 0.5, 1000), event_capture.THRESHOLD_FLOOR).astype(np.float32)
+    assert np.array_equal(on, expect_on) and on.dtype == np.float32
+    assert on.min() == pytest.approx(event_capture.THRESHOLD_FLOOR) and off.min() >= event_capture.THRESHOLD_FLOOR

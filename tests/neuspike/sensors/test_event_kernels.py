@@ -59,7 +59,7 @@ def test_same_events_on_both_backends_for_every_effect(name):
     assert sum(len(s) for s in ref) > 100  # the scene makes events
     for a, b in zip(got, ref):
         assert events_of(a) == events_of(b)
-    assert cam._mem.tobytes() == ref_cam._mem.tobytes() and cam._sig.tobytes() == ref_cam._sig.tobytes()
+    assert cam.state.mem.tobytes() == ref_cam.state.mem.tobytes() and cam.state.sig.tobytes() == ref_cam.state.sig.tobytes()
     assert cam.backend == "numba" and ref_cam.backend == "numpy"
     assert got[0].meta["stages"][0]["params"]["backend"] == "numba"
 
@@ -143,8 +143,8 @@ def test_same_events_with_dense_shot_noise_refractory_and_many_crossings(period_
     cam, *got = captures("numba", effects, frames, times, threshold_on=0.12, threshold_off=0.3)
     for a, b in zip(got, ref):
         assert events_of(a) == events_of(b)
-    assert cam._mem.tobytes() == ref_cam._mem.tobytes()
-    assert cam._last_emit_s.tobytes() == ref_cam._last_emit_s.tobytes()
+    assert cam.state.mem.tobytes() == ref_cam.state.mem.tobytes()
+    assert cam.state.last_emit_s.tobytes() == ref_cam.state.last_emit_s.tobytes()
     _, *unfiltered = captures("numpy", effects[:3], frames, times, threshold_on=0.12, threshold_off=0.3)
     assert sum(map(len, ref)) < sum(map(len, unfiltered))  # the period did drop events
 
