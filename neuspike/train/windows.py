@@ -206,11 +206,12 @@ def simulate_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.
 
 
 def save_sample(path: str | os.PathLike, sample: Sample) -> None:
-    """Write a simulated window compactly (bit-packed planes, window events only), atomically."""
+    """Write a simulated window compactly (bit-packed planes, window events only, the sensor's dark rate), atomically."""
     sp, ev = sample.spikes, sample.window_events()
     buf = io.BytesIO()
     np.savez(buf, planes=np.packbits(sp.planes, axis=None), shape=np.array(sp.planes.shape),
              plane_rate_hz=sp.plane_rate_hz, start_s=sp.start_s, gain=sp.gain, threshold=sp.threshold,
+             dark_rate=np.nan if sp.dark_rate is None else sp.dark_rate,
              t=ev.t_s, x=ev.x.astype(np.uint16), y=ev.y.astype(np.uint16), p=ev.p.astype(np.int8),
              window=np.array([sample.window_start_s, sample.key_time_s, sample.window_end_s]),
              event_threshold=np.nan if sample.event_threshold is None else sample.event_threshold,
@@ -224,8 +225,10 @@ def load_sample(path: str | os.PathLike) -> Sample:
         with np.load(path) as z:
             shape = tuple(int(v) for v in z["shape"])
             planes = np.unpackbits(z["planes"], count=int(np.prod(shape))).reshape(shape).view(bool)
+            dark = float(z["dark_rate"]) if "dark_rate" in z.files else np.nan  # (windows written before it was kept)
             spikes = SpikeStream(planes=planes, plane_rate_hz=float(z["plane_rate_hz"]), start_s=float(z["start_s"]),
-                                 gain=float(z["gain"]), threshold=float(z["threshold"]))
+                                 gain=float(z["gain"]), threshold=float(z["threshold"]),
+                                 dark_rate=None if np.isnan(dark) else dark)
             events = EventStream(t_s=z["t"], x=z["x"].astype(np.int64), y=z["y"].astype(np.int64),
                                  p=z["p"].astype(np.int8), width=shape[2], height=shape[1])
             w0, key, w1 = (float(v) for v in z["window"])

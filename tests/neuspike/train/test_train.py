@@ -992,3 +992,25 @@ def test_the_light_noise_sweep_grid_draws_the_reports_points_and_leaves_old_keys
         tiny_spec(tmp_path, sweep_fraction=1.0, sweep_grid="everything")
     with pytest.raises(InputError, match="give sweep_fraction > 0"):
         tiny_spec(tmp_path, sweep_grid="light-noise")
+
+
+@pytest.mark.parametrize("dark_rate", [None, 0.0, 1 / 180])
+def test_a_saved_window_round_trips_with_its_dark_rate(tmp_path, dark_rate):
+    """The shard keeps everything a method reads, the sensor's dark rate included (the counted level
+    subtracts it; without it a method would estimate it from the window)."""
+    from neuspike.sample import Sample
+    from neuspike.streams import EventStream, SpikeStream
+
+    rng = np.random.default_rng(0)
+    planes = rng.random((16, 6, 9)) < 0.2
+    spikes = SpikeStream(planes=planes, plane_rate_hz=20_000.0, start_s=0.0, gain=0.25, threshold=1.0,
+                         dark_rate=dark_rate)
+    events = EventStream(t_s=np.array([1e-4, 2e-4]), x=np.array([1, 2]), y=np.array([0, 5]),
+                         p=np.array([1, -1], np.int8), width=9, height=6)
+    sample = Sample(height=6, width=9, key_time_s=4e-4, window_start_s=0.0, window_end_s=8e-4, spikes=spikes,
+                    events=events, event_threshold=0.2, ground_truth=rng.random((6, 9)).astype(np.float32))
+    save_sample(tmp_path / "w.npz", sample)
+    back = load_sample(tmp_path / "w.npz")
+    assert back.spikes.dark_rate == dark_rate
+    assert np.array_equal(back.spikes.planes, planes) and back.spikes.gain == 0.25
+    assert np.array_equal(back.events.t_s, events.t_s) and np.array_equal(back.ground_truth, sample.ground_truth)
