@@ -19,18 +19,14 @@ from typing import Any, Sequence
 from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
-WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "offset_weight", "support_weight",
-               "edge_ssim_weight", "scale_range", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights",
-               "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights",
-               "broad_fraction", "gate_targets", "gate_target_weight", "gate_forcing")
+WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "scale_range", "crop_trim",
+               "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
-              "scale_range", "spike_only_fraction", "workers", "val_view", "offset_weight", "support_weight",
-              "edge_ssim_weight", "crop_trim", "spike_floor_weight", "spike_floor_noise_weights", "spike_floor_terms",
-              "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction", "gate_targets",
-              "gate_target_weight", "gate_forcing", "size", "view", "length", "kinds",
+              "scale_range", "spike_only_fraction", "workers", "val_view", "crop_trim", "train_parts", "sweep_fraction",
+              "sweep_scenes", "sweep_scene_weights", "broad_fraction", "size", "view", "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
@@ -58,13 +54,20 @@ a recurrent method (e2vid, firenet-sim) trains on sequences of event windows of 
 with exact-flow temporal loss; a feed-forward one (neuspike-net) on single windows of spikes and
 events. The data are simulated once into a shard and reused; the run folder (--out) holds
 spec.json, checkpoint.pt, train_log.csv and the best-by-validation weights with their JSON card.
-Running the same command again resumes from the checkpoint (a different spec is refused)."""
+Running the same command again resumes from the checkpoint (a different spec is refused).
+
+The loss of single windows is a sum of registered terms, each with its parameters (the data section's
+"losses"; by default l1 and ssim): offset, support, edge_ssim, gate_target, distill and spike_floor
+are set with --set data.losses.TERM=WEIGHT or --set 'data.losses.TERM={...}' (neuspike/train/terms.py
+lists each term's parameters)."""
 
 EPILOG = """\
 examples (the spec behind each shipped network is in its JSON card; its model card says how to run it):
   python -m neuspike.train neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 \\
       --val-windows 32 --val-every 200 --lr 1e-3 --warmup 100 --threads 1 --export
   python -m neuspike.train neuspike-net --spec spec.json --out runs/nsn-again   # a spec file, as written
+  python -m neuspike.train neuspike-net --set data.losses.offset=0.5 \
+      --set 'data.losses.distill={"weight": 1, "teacher": "neuspike/trained/neuspike-net.safetensors"}'
   python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
   python -m neuspike.train e2vid --device cuda            # on a GPU (--device cpu resumes it on a CPU)
   python -m neuspike.train e2vid --quick                  # a one-minute smoke run (its weights stay in runs/)"""
@@ -136,27 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--val-view", metavar="WxH",
                    help="single windows: validate on windows of this size (e.g. 400x250, the sweeps' frame) "
                         "instead of the square training view, so the best step is chosen on whole frames")
-    d.add_argument("--offset-weight", type=float, metavar="W",
-                   help="single windows: add W x the error of each crop's mean level to the loss (default 0)")
-    d.add_argument("--support-weight", type=float, metavar="W",
-                   help="single windows, support heads: add W x the error of the head's convex part (the chosen "
-                        "temporal support before its correction) to the loss (default 0)")
-    d.add_argument("--edge-ssim-weight", type=float, metavar="W",
-                   help="single windows: add W x the SSIM loss over each crop's edge pixels (the top 10%% of the "
-                        "truth's gradient) to the loss (default 0)")
     d.add_argument("--crop-trim", type=int, metavar="N",
                    help="single windows: cut 0..N rows and 0..N columns (drawn per step) off each batch's crops, so "
                         "the network trains on sides that it pads as at inference (0..7; default 0)")
-    d.add_argument("--spike-floor-weight", type=float, metavar="W",
-                   help="single windows, fusion networks: add W x the batch mean of max(0, crop loss of the fusion - "
-                        "crop loss of its own spike-only forward) to the fusion steps' loss (default 0)")
-    d.add_argument("--spike-floor-noise-weights", metavar="LEVEL=W,...",
-                   help="single windows, fusion networks: the spike floor's weight for the windows of the named "
-                        "noise levels (none, small, medium, high), in place of --spike-floor-weight, which the "
-                        "others keep; e.g. medium=8,high=16")
-    d.add_argument("--spike-floor-terms", choices=("both", "ssim"),
-                   help="single windows, fusion networks: what the spike floor compares per crop: 'both' the L1 + "
-                        "SSIM loss (default), 'ssim' the SSIM loss alone")
     d.add_argument("--train-parts", choices=("all", "motion"),
                    help="single windows, fusion networks with --init-from: 'motion' trains the motion path only and "
                         "holds the rest (so the spike-only variant stays as given; default all)")
@@ -169,15 +154,6 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--broad-fraction", type=float, metavar="P",
                    help="single windows: a fraction P of the picture cells (pan, zoom, fan, still) take a broad-leaves "
                         "picture (wide, mildly shaded regions) in place of a training photograph's region (default 0)")
-    d.add_argument("--gate-targets", metavar="NOISE:LEVEL=GAIN,...",
-                   help="single windows, fusion networks with a motion gate: target gains for the gate's motion levels "
-                        "0-3 (x_m^0..x_m^3) on the windows of the named noise levels, each in [0, 2) (1 leaves a level "
-                        "as it is, 0 shuts it); e.g. high:1=0,medium:1=0.5 (needs --gate-target-weight)")
-    d.add_argument("--gate-target-weight", type=float, metavar="W",
-                   help="single windows: weight of the --gate-targets term (the mean squared gain miss; default 0)")
-    d.add_argument("--gate-forcing", action="store_const", const=True, default=None,
-                   help="single windows, with --gate-targets: the training forward uses the targets in place of the "
-                        "supervised gains (the gate still learns from its miss; validation uses its own gains)")
     d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
                    help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
                         "(e.g. 1,1,4,1; default equal)")
@@ -224,41 +200,6 @@ def _numbers(text: str, flag: str, form: str, count: int) -> tuple[float, ...]:
     if len(values) != count:
         raise InputError(f"{flag}: expected {form}, got {text!r}")
     return values
-
-
-def _level_weights(text: str, flag: str) -> dict[str, float]:
-    """``"LEVEL=W,..."`` -> {level: weight}; a clear error naming ``flag`` otherwise (levels checked by the spec)."""
-    from neuspike.errors import InputError
-
-    out: dict[str, float] = {}
-    for item in _list(text):
-        level, eq, value = item.partition("=")
-        try:
-            out[level.strip()] = float(value)
-        except ValueError:
-            eq = ""
-        if not eq or not level.strip():
-            raise InputError(f"{flag}: expected LEVEL=WEIGHT,... (e.g. medium=8,high=16), got {text!r}")
-    return out
-
-
-def _gate_targets(text: str) -> dict[str, dict[str, float]]:
-    """``"NOISE:LEVEL=GAIN,..."`` -> {noise level: {motion level: gain}}; a clear error otherwise (the
-    names and ranges are checked by the spec)."""
-    from neuspike.errors import InputError
-
-    out: dict[str, dict[str, float]] = {}
-    for item in _list(text):
-        noise, colon, rest = item.partition(":")
-        level, eq, value = rest.partition("=")
-        try:
-            gain = float(value)
-        except ValueError:
-            eq = ""
-        if not colon or not eq or not noise.strip() or not level.strip():
-            raise InputError(f"--gate-targets: expected NOISE:LEVEL=GAIN,... (e.g. high:1=0,medium:1=0.5), got {text!r}")
-        out.setdefault(noise.strip(), {})[level.strip()] = gain
-    return out
 
 
 def _pair(text: str, flag: str, unit: str) -> tuple[float, float]:
@@ -332,19 +273,13 @@ def _spec_of_flags(args: argparse.Namespace):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
-                 "view_fraction", "offset_weight", "support_weight", "edge_ssim_weight", "crop_trim",
-                 "spike_floor_weight", "spike_floor_terms", "train_parts", "sweep_fraction", "sweep_scenes",
-                 "broad_fraction", "gate_target_weight", "gate_forcing"):
+                 "view_fraction", "crop_trim", "train_parts", "sweep_fraction", "sweep_scenes", "broad_fraction"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
-    if args.spike_floor_noise_weights is not None:
-        kw["spike_floor_noise_weights"] = _level_weights(args.spike_floor_noise_weights, "--spike-floor-noise-weights")
-    if args.gate_targets is not None:
-        kw["gate_targets"] = _gate_targets(args.gate_targets)
     if args.sweep_scene_weights is not None:
         kw["sweep_scene_weights"] = _numbers(args.sweep_scene_weights, "--sweep-scene-weights",
                                              "PAN,ZOOM,FAN,STILL", 4)

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence, Union
 
 from neuspike.errors import InputError
+from neuspike.train.terms import DEFAULT_LOSSES, legacy_losses, resolve_losses
 from neuspike.utils.checks import check_int
 
 __all__ = [
@@ -92,19 +93,13 @@ def _check_levels(levels: Any) -> tuple[str, ...]:
 DEFAULT_SPEED_RANGE = (100.0, 4000.0)
 
 
-def _loss_weight(name: str, value: Any) -> float:
-    """A loss term's weight: a finite number >= 0 (not a bool), as a float."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= float(value) < math.inf:
-        raise InputError(f"{name}: expected a finite weight >= 0, got {value!r}")
-    return float(value)
-
-
 #: The motion levels a gate target may name (x_m^0 .. x_m^3).
 GATE_LEVELS = ("0", "1", "2", "3")
 
 
-def _gate_targets(value: Any) -> dict[str, dict[str, float]]:
-    """``gate_targets`` checked: {noise level: {motion level: gain in [0, 2)}}, in NOISE_LEVELS and level order."""
+def gate_targets(value: Any) -> dict[str, dict[str, float]]:
+    """The ``gate_target`` loss term's targets checked: {noise level: {motion level: gain in [0, 2)}}, in
+    NOISE_LEVELS and level order."""
     shape = "{noise level: {motion level '0'..'3': gain in [0, 2)}}"
     if not isinstance(value, dict) or not value:
         raise InputError(f"gate_targets: expected {shape} with at least one level, got {value!r}")
@@ -168,29 +163,17 @@ class WindowData:
         (the test photographs are refused).
     workers : int
         Processes that simulate the shard (not part of the run's identity).
-    ssim_weight, ssim_window : float, int
-        Loss = L1 + ssim_weight * kornia SSIM loss (window ``ssim_window``).
+    losses : {term: weight or {parameter: value}}
+        The loss: the registered terms it adds up (:mod:`neuspike.train.terms`: ``l1``, ``ssim``,
+        ``offset``, ``support``, ``edge_ssim``, ``gate_target``, ``distill``, ``spike_floor``), each with
+        its parameters; a bare number is the weight. Default: L1 + the SSIM loss (window 11). Kept in
+        the registry's order with every parameter filled in; a term at weight 0 with its defaults is
+        left out. The earlier fields (``ssim_weight``, ``offset_weight``, ``spike_floor_weight``, ...) are
+        read into it (:func:`neuspike.train.terms.legacy_losses`).
     val_view : (int, int) or None
         Validation windows at this (width, height), e.g. (400, 250), the sweeps' frame, instead of the
         square ``view``: the training crops stay small, while the best step is chosen on whole frames,
         where the level of an image is set. ``None`` (the default): the square view.
-    offset_weight : float
-        Adds offset_weight * |mean(output) - mean(truth)| per crop (averaged over the batch): an error
-        of the whole image's level, to which the SSIM term is blind and which the per-pixel L1
-        weighs no more than any other error. Default 0 (the term is off; earlier specs mean 0).
-    support_weight : float
-        Adds support_weight * the mean absolute error of the support head's convex part (its
-        softmax-weighted combination of the spike estimates, before the correction) against the
-        truth. The total loss never scores the temporal support the head chooses, only the image
-        after the correction, which can undo a support wider than the motion allows; this term
-        rewards a support that is right on its own: wide where the radiance holds still, narrow on
-        moving edges. ``"support"`` heads only. Default 0 (off; earlier specs mean 0).
-    edge_ssim_weight : float
-        Adds edge_ssim_weight * the SSIM loss ``(1 - ssim) / 2`` averaged over each crop's edge pixels
-        only (the top 10 % of the truth's gradient magnitude, as the fast-motion report's edge scores):
-        the whole-image SSIM term weighs an edge no more than a flat pixel, and on fast pans the
-        networks lose to SNM in the SSIM's structure factor at the edges. Default 0 (off; earlier
-        specs mean 0).
     spike_only_fraction : float
         Fraction of steps (for a fusion network) run with the motion path silenced, which trains the
         spike-only variant inside the same weights.
@@ -201,24 +184,6 @@ class WindowData:
         inference (a 400x250 frame gains 6 zero rows; a network that pads inside and normalises its
         features over the padded map never saw that in training, and at high noise the band cost the
         fusion 2.3 dB at the sweeps' frame). 0 to 7; 0 (the default, earlier specs): square crops.
-    spike_floor_weight : float
-        Fusion networks only: adds spike_floor_weight * the batch mean of ``relu(l_fusion - l_spike)``
-        on the fusion steps, ``l`` each crop's own L1 + ``ssim_weight`` * SSIM loss and ``l_spike`` that
-        of the spike-only forward of the same weights on the same crop, computed without gradient. The
-        fusion is pushed to be no worse than its own spike-only self crop by crop; where the events
-        only hurt (heavy noise) the motion gate can shut them out, since ``F(t, 0) = t``. Default 0
-        (off; earlier specs mean 0).
-    spike_floor_noise_weights : {noise level: weight} or None
-        Fusion networks only: the spike floor's weight for the crops of the named sensor-noise levels
-        (each training window's own level), in place of ``spike_floor_weight``, which the levels not
-        named keep; the term is then the batch mean of ``w_i * relu(l_fusion,i - l_spike,i)``. The
-        floor can then weigh heavily where the events are noisy without taxing the clean crops, where
-        the events carry the gain. Default None (every crop at ``spike_floor_weight``).
-    spike_floor_terms : ``"both"`` or ``"ssim"``
-        What the spike floor compares crop by crop: ``"both"`` (the default, earlier specs), the crop's
-        L1 + ``ssim_weight`` * SSIM loss; ``"ssim"``, its SSIM loss alone. Where the events raise the
-        fusion's PSNR but lower its SSIM (fine noise over flat regions at heavy sensor noise), the L1 gain
-        can pay for the SSIM loss inside ``"both"``; ``"ssim"`` floors the structure alone.
     train_parts : ``"all"`` or ``"motion"``
         ``"motion"`` (fusion networks, with ``init_from``): only the motion path learns (the motion
         encoder, the fusion modules, the motion gate, the event transformer); the texture path, the
@@ -259,23 +224,6 @@ class WindowData:
         stream of their own, and every other draw of the cell is as it would be with the photograph, so
         a shard with the fraction differs from one without only in those pictures. 0 to 1; default 0
         (earlier specs and their shard keys mean 0).
-    gate_targets : {noise level: {motion level: gain}} or None
-        Fusion networks with a motion gate (``motion_gate`` other than ``"none"``): targets for the
-        per-image gains of the noise gate (``"stats-noise"``), or else of the motion gate, on the
-        windows of the named sensor-noise levels (each training window's own level), the motion levels
-        named ``"0"`` to ``"3"`` (x_m^0 .. x_m^3), each gain in [0, 2) (1 leaves a level as it is, 0
-        shuts it). Each fusion step adds ``gate_target_weight`` * the mean over the (crop, level)
-        pairs with a target of ``(g - target)^2``. The gate still reads only the representations'
-        statistics, so at inference it must tell the noise level from the data themselves; the
-        supervision says what to do with it (for instance: no fine motion features under heavy noise,
-        where they add structure that is not in the scene). Default None.
-    gate_target_weight : float
-        The weight of the ``gate_targets`` term; > 0 with ``gate_targets``, 0 (the default) without.
-    gate_forcing : bool
-        With ``gate_targets``: on the training steps the supervised gate's gains that have a target are
-        replaced by the target itself (the gate still learns from its miss), so the rest of the
-        network trains on the gains the targets say, not on the gate's guesses; validation and
-        inference use the gate's own gains. Default False.
     """
 
     kind: ClassVar[str] = "windows"
@@ -290,42 +238,28 @@ class WindowData:
     noise_levels: tuple[str, ...] = NOISE_LEVELS
     photos: tuple[str, ...] = _PHOTO_DEFAULT
     workers: int = 2
-    ssim_weight: float = 1.0
-    ssim_window: int = 11
     spike_only_fraction: float = 0.3
-    offset_weight: float = 0.0
-    support_weight: float = 0.0
-    edge_ssim_weight: float = 0.0
     val_view: tuple[int, int] | None = None
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
-    spike_floor_weight: float = 0.0
-    spike_floor_noise_weights: dict[str, float] | None = None
-    spike_floor_terms: str = "both"
     train_parts: str = "all"
     sweep_fraction: float = 0.0
     sweep_grid: str = "sweeps"
     sweep_scenes: bool = False
     sweep_scene_weights: tuple[float, float, float, float] | None = None
     broad_fraction: float = 0.0
-    gate_targets: dict[str, dict[str, float]] | None = None
-    gate_target_weight: float = 0.0
-    gate_forcing: bool = False
+    losses: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_LOSSES))
 
-    #: What ``spike_floor_terms`` may be.
-    FLOOR_TERMS: ClassVar[tuple[str, ...]] = ("both", "ssim")
     #: What ``train_parts`` may be.
     TRAIN_PARTS: ClassVar[tuple[str, ...]] = ("all", "motion")
 
     def __post_init__(self) -> None:
         put = object.__setattr__
-        if self.spike_floor_terms not in self.FLOOR_TERMS:
-            raise InputError(f"spike_floor_terms: expected one of {self.FLOOR_TERMS}, got {self.spike_floor_terms!r}")
         if self.train_parts not in self.TRAIN_PARTS:
             raise InputError(f"train_parts: expected one of {self.TRAIN_PARTS}, got {self.train_parts!r}")
         if isinstance(self.crop_trim, bool) or not isinstance(self.crop_trim, int) or not 0 <= self.crop_trim <= 7:
             raise InputError(f"crop_trim: expected a whole number of pixels 0..7, got {self.crop_trim!r}")
-        for name in ("view", "train_items", "val_items", "workers", "ssim_window"):
+        for name in ("view", "train_items", "val_items", "workers"):
             _whole(name, getattr(self, name), 1)
         for name in ("spike_only_fraction", "sweep_fraction", "broad_fraction"):
             value = getattr(self, name)
@@ -350,31 +284,7 @@ class WindowData:
             if not self.sweep_scenes:
                 raise InputError("sweep_scene_weights: applies to the sweep scenes; give sweep_scenes true too")
             put(self, "sweep_scene_weights", tuple(float(v) for v in w))
-        if not (isinstance(self.offset_weight, (int, float)) and 0.0 <= float(self.offset_weight) < math.inf):
-            raise InputError(f"offset_weight: expected a finite weight >= 0, got {self.offset_weight!r}")
-        put(self, "offset_weight", float(self.offset_weight))
-        for name in ("support_weight", "edge_ssim_weight", "spike_floor_weight"):
-            put(self, name, _loss_weight(name, getattr(self, name)))
-        if self.spike_floor_noise_weights is not None:
-            w = self.spike_floor_noise_weights
-            if not isinstance(w, dict) or not w:
-                raise InputError("spike_floor_noise_weights: expected {noise level: weight} with at least one "
-                                 f"level, got {w!r}")
-            bad = sorted(set(w) - set(NOISE_LEVELS))
-            if bad:
-                raise InputError(f"spike_floor_noise_weights: unknown noise levels {bad}; choose from "
-                                 f"{', '.join(NOISE_LEVELS)}")
-            put(self, "spike_floor_noise_weights",
-                {k: _loss_weight(f"spike_floor_noise_weights[{k!r}]", w[k]) for k in NOISE_LEVELS if k in w})
-        put(self, "gate_target_weight", _loss_weight("gate_target_weight", self.gate_target_weight))
-        if self.gate_targets is not None:
-            put(self, "gate_targets", _gate_targets(self.gate_targets))
-        if (self.gate_targets is None) != (self.gate_target_weight == 0.0):
-            raise InputError("gate_targets and gate_target_weight: give both (targets and a weight > 0) or neither")
-        if not isinstance(self.gate_forcing, bool):
-            raise InputError(f"gate_forcing: expected true or false, got {self.gate_forcing!r}")
-        if self.gate_forcing and self.gate_targets is None:
-            raise InputError("gate_forcing: forces the gains to gate_targets; give gate_targets too")
+        put(self, "losses", resolve_losses(self.losses))
         if self.val_view is not None:
             try:
                 vw, vh = (int(v) for v in self.val_view)
@@ -633,16 +543,9 @@ class TrainSpec:
         Also write the best weights into the package's ``neuspike/trained/``.
     export_dir : str or None
         Also write the best weights into this folder.
-    teacher : str or None
-        Distillation (single windows only): a trained network of the same method (a ``.safetensors`` with
-        its JSON card beside it, e.g. the shipped full ``neuspike-net``) run on each step's inputs in the
-        step's variant, without gradient; the student also learns to match its image. Its architecture
-        comes from its card, so a compact student (``params`` of ``LITE_DESIGN``) learns from the full
-        network. A fusion student needs a fusion teacher (its spike-only steps ask the teacher's
-        spike-only path). Default None.
-    distill_weight : float
-        With ``teacher``: adds ``distill_weight`` * (L1 + ``ssim_weight`` * SSIM loss) of the student's
-        image against the teacher's. > 0 with a teacher, 0 (the default) without.
+    Distillation is the ``distill`` loss term of a window spec's ``losses``
+    (:mod:`neuspike.train.terms`: ``{"distill": {"weight": 1, "teacher": "neuspike/trained/neuspike-net.safetensors"}}``);
+    the earlier top-level ``teacher`` and ``distill_weight`` are read into it.
     """
 
     method: str = "neuspike-net"
@@ -668,8 +571,6 @@ class TrainSpec:
     part_lr_scales: dict[str, float] = field(default_factory=dict)
     export: bool = False
     export_dir: str | None = None
-    teacher: str | None = None
-    distill_weight: float = 0.0
 
     #: Fields that do not change what a run computes (the device only its rounding): a resumed run may change them.
     NOT_IDENTITY: ClassVar[tuple[str, ...]] = ("out_dir", "threads", "device", "export", "export_dir")
@@ -707,17 +608,6 @@ class TrainSpec:
         put(self, "part_lr_scales", {k: float(v) for k, v in self.part_lr_scales.items()})
         if self.init_from is not None and not str(self.init_from).endswith(".safetensors"):
             raise InputError(f"init_from: expected a .safetensors file, got {self.init_from!r}")
-        put(self, "distill_weight", _loss_weight("distill_weight", self.distill_weight))
-        if self.teacher is not None:
-            if not str(self.teacher).endswith(".safetensors"):
-                raise InputError(f"teacher: expected a .safetensors file, got {self.teacher!r}")
-            if not isinstance(self.data, WindowData):
-                raise InputError("teacher: distillation trains on single windows (neuspike-net); this spec's data are "
-                                 "sequences")
-            if not self.distill_weight:
-                raise InputError("teacher: give distill_weight > 0 (the weight of the teacher's term)")
-        elif self.distill_weight:
-            raise InputError(f"distill_weight {self.distill_weight}: needs a teacher (a trained network's .safetensors)")
         if isinstance(self.data, WindowData):
             if self.data.train_parts != "all" and self.init_from is None:
                 raise InputError(f"train_parts {self.data.train_parts!r}: holds the other parts as init_from gives "
@@ -786,6 +676,8 @@ def _data_section(d: Mapping[str, Any], where: str) -> DataSection:
         raise InputError(f"{where}: data.kind must be one of {sorted(DATA_KINDS)}, got {kind!r}")
     if d.get("view") is not None and kind == "sequences":
         d["view"] = tuple(d["view"])
+    if kind == "windows":  # the earlier loss fields become their registered terms
+        d, d["losses"] = legacy_losses({k: v for k, v in d.items() if k != "losses"}, d.get("losses"))
     return _strict(DATA_KINDS[kind], d, f"{where} (data)")
 
 
@@ -804,6 +696,12 @@ def spec_from_dict(d: Mapping[str, Any], *, where: str = "spec", out_dir: str | 
         raise InputError(f"{where}: a spec of an earlier trainer (no data.kind), which this trainer no longer reads; "
                          f"run it at commit {EARLIER_TRAINERS_COMMIT} (or earlier), or write it in the current form "
                          "(python -m neuspike.train METHOD --help; a run folder's spec.json shows one)")
+    teacher = {k: d.pop(k) for k in ("teacher", "distill_weight") if k in d}  # earlier: distillation at the top
+    if any(v not in (None, 0, 0.0) for v in teacher.values()):
+        if d["data"].get("kind") != "windows":
+            raise InputError(f"{where}: teacher: distillation trains on single windows (neuspike-net); this spec's "
+                             "data are sequences")
+        d["data"] = {**d["data"], **teacher}
     d["data"] = _data_section(d["data"], where)
     if "out_dir" not in d and out_dir is not None:
         d["out_dir"] = out_dir

@@ -25,6 +25,7 @@ and reused across epochs with random crops, flips and quarter turns
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -49,6 +50,7 @@ from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.train.spec import KIND_WEIGHTS, SWEEP_GRIDS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
+from neuspike.train.terms import TERMS, Step
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
@@ -326,24 +328,14 @@ class WindowTask:
       target the sample's ground truth (1, 1, H, W), cut by ``crop_trim`` where it is set; drawn and
       augmented on the CPU, then moved to the method's device (``method.device``), where the loss and
       the validation run.
-    * **loss**: L1 + ``ssim_weight`` * ``kornia.losses.SSIMLoss`` (window ``ssim_window``, data range 1)
-      + ``offset_weight`` * the mean absolute error of each crop's mean level + ``support_weight`` *
-      the L1 error of the support head's convex part + ``edge_ssim_weight`` * the SSIM loss over each
-      crop's edge pixels (:func:`edge_mask`; all three 0 by default).
+    * **loss**: the sum of the spec's registered terms (``data.losses``, :mod:`neuspike.train.terms`), in
+      the registry's order: by default L1 + the SSIM loss (``kornia.losses.SSIMLoss``, window 11, data
+      range 1); the others (level offset, support, edge SSIM, gate targets, distillation, spike floor)
+      where a spec names them.
     * **spike-only steps**: for a fusion network (``spike_only=False``), a fraction
       ``spike_only_fraction`` of the steps (drawn from ``derive_rng(seed, "modality", k)``) runs with
       the motion path silenced, so the same weights also train the spike-only variant, validated and
       exported as ``<name>-spike``.
-    * **spike floor**: with ``spike_floor_weight`` (or ``spike_floor_noise_weights``), each fusion step
-      also runs the spike-only forward of the same crops without gradient and adds the batch mean of
-      ``w_i * relu(l_fusion - l_spike)``, ``l`` a crop's own L1 + ``ssim_weight`` * SSIM loss (its SSIM
-      loss alone with ``spike_floor_terms="ssim"``) and ``w_i`` the weight of crop i's noise level
-      (``spike_floor_weight`` for the levels not named).
-    * **gate targets**: with ``gate_targets``, each fusion step also adds ``gate_target_weight`` * the
-      mean squared difference between the motion gate's gains and the targets of each crop's noise
-      level, over the (crop, level) pairs that have one (the gains captured from the step's own forward;
-      the noise gate's where the network has one, ``motion_gate="stats-noise"``, else the motion gate's);
-      with ``gate_forcing`` the forward uses the targets in place of those gains.
     * **held parts**: with ``train_parts="motion"`` only the parameters under ``MOTION_PREFIXES``
       learn (:meth:`held`); the rest stay as ``init_from`` gave them.
     * **validation**: the fixed validation windows (full size, no augmentation): L1, PSNR, SSIM;
@@ -362,27 +354,25 @@ class WindowTask:
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
         self._noise_levels: dict[int, str] = {}  # training window -> its noise level, read once
-        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.data.ssim_window, max_val=1.0).to(self.device)
-        fusion_only = [f"spike_floor_weight {self.data.spike_floor_weight}"] if self.data.spike_floor_weight else []
-        if self.data.spike_floor_noise_weights:
-            fusion_only.append(f"spike_floor_noise_weights {self.data.spike_floor_noise_weights}")
-        fusion_only += [f"train_parts {self.data.train_parts!r}"] if self.data.train_parts != "all" else []
-        fusion_only += ([f"spike_floor_terms {self.data.spike_floor_terms!r}"]
-                        if self.data.spike_floor_terms != "both" else [])
+        self.losses = self.data.losses
+        #: The SSIM term's weight and window: also what a crop's own loss weighs (distillation, spike floor).
+        self.ssim_weight = self.losses["ssim"]["weight"] if "ssim" in self.losses else 0.0
+        self.ssim_window = self.losses["ssim"]["window"] if "ssim" in self.losses else 11
+        self.ssim_loss = kornia.losses.SSIMLoss(window_size=self.ssim_window, max_val=1.0).to(self.device)
+        fusion_only = [f"train_parts {self.data.train_parts!r}"] if self.data.train_parts != "all" else []
         if fusion_only and not self.fusion:
             raise InputError(f"{', '.join(fusion_only)}: fusion networks only (the network has no motion path)")
-        # the gate gate_targets supervise: the noise gate where there is one, else the motion gate
+        # the gate a gate_target term supervises: the noise gate where there is one, else the motion gate
         self.supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
-        if self.data.gate_targets is not None and self.supervised_gate is None:
-            raise InputError("gate_targets: the network has no motion gate to supervise (a fusion network with "
-                             "params motion_gate 'stats', 'stats-local' or 'stats-noise')")
-        self.teacher = self._teacher(spec.teacher) if spec.teacher is not None else None
-        if self.data.support_weight and getattr(self.module, "head", "tanh") == "tanh":
-            raise InputError(f"support_weight {self.data.support_weight}: the network's head has no convex part "
-                             f"to score (give a 'support' or 'support-count' head, or weight 0)")
+        self.teacher: torch.nn.Module | None = None
+        self.terms = [(TERMS[name], params) for name, params in self.losses.items()]
+        for term, params in self.terms:
+            if term.setup is not None:
+                term.setup(self, params)
+        self.needs_convex = any(term.needs_convex for term, _ in self.terms)
 
-    def _teacher(self, path: str) -> torch.nn.Module:
-        """The teacher's module (``spec.teacher``): created untrained from its JSON card's parameters, the
+    def load_teacher(self, path: str) -> torch.nn.Module:
+        """The teacher's module (the ``distill`` term's ``teacher``): created untrained from its JSON card's parameters, the
         file loaded by the same loader as every learned method's, held in eval mode without gradient."""
 
         weights, card = Path(path), Path(path).with_suffix(".json")
@@ -475,22 +465,10 @@ class WindowTask:
             levels.append(cache[i])
         return levels
 
-    def floor_weights(self, step: int) -> float | torch.Tensor | None:
-        """The spike floor's weight on ``step``: one number for every crop (``spike_floor_weight``), each
-        crop's own ((B,), on the device; with ``spike_floor_noise_weights``), or None where it is 0."""
-        data = self.data
-        if data.spike_floor_noise_weights is None:
-            return data.spike_floor_weight or None
-        w = [data.spike_floor_noise_weights.get(level, data.spike_floor_weight) for level in self.noise_levels(step)]
-        return torch.tensor(w, dtype=torch.float32, device=self.device) if any(w) else None
-
-    def gate_targets(self, step: int) -> tuple[torch.Tensor, torch.Tensor] | None:
-        """``gate_targets`` for ``step``'s batch as ``(target, mask)``, each (B, 4) in the gate's order
-        (x_m^3, x_m^2, x_m^1, x_m^0) on the device, mask 1 where a crop's noise level names a target for
-        that level; None without targets or where no crop of the batch has one."""
-        targets = self.data.gate_targets
-        if targets is None:
-            return None
+    def gate_targets(self, step: int, targets: dict[str, dict[str, float]]) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """The ``gate_target`` term's ``targets`` for ``step``'s batch as ``(target, mask)``, each (B, 4) in the
+        gate's order (x_m^3, x_m^2, x_m^1, x_m^0) on the device, mask 1 where a crop's noise level names a
+        target for that level; None where no crop of the batch has one."""
         value = torch.zeros(self.spec.batch, 4)
         mask = torch.zeros(self.spec.batch, 4)
         for i, level in enumerate(self.noise_levels(step)):
@@ -540,16 +518,16 @@ class WindowTask:
         return self.data.train_parts == "motion" and not name.startswith(MOTION_PREFIXES)
 
     def crop_losses(self, pred: torch.Tensor, target: torch.Tensor, terms: str = "both") -> torch.Tensor:
-        """Each crop's own L1 + ``ssim_weight`` * SSIM loss, (B,): the batch mean of it is the main loss.
-        ``terms="ssim"``: each crop's SSIM loss alone."""
+        """Each crop's own L1 + the SSIM term's weight * SSIM loss, (B,) (what distillation and the spike
+        floor compare). ``terms="ssim"``: each crop's SSIM loss alone."""
         import kornia
 
         pred = pred.float()
-        ssim_map = kornia.metrics.ssim(pred, target, window_size=self.data.ssim_window, max_val=1.0)
+        ssim_map = kornia.metrics.ssim(pred, target, window_size=self.ssim_window, max_val=1.0)
         structure = ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
         if terms == "ssim":
             return structure
-        return (pred - target).abs().mean(dim=(1, 2, 3)) + self.data.ssim_weight * structure
+        return (pred - target).abs().mean(dim=(1, 2, 3)) + self.ssim_weight * structure
 
     def forward(self, inputs: Sequence[torch.Tensor], variant: str, *, parts: bool = False
                 ) -> torch.Tensor | tuple[torch.Tensor, torch.Tensor]:
@@ -561,32 +539,23 @@ class WindowTask:
 
     def loss(self, pred: torch.Tensor | tuple[torch.Tensor, torch.Tensor], target: torch.Tensor
              ) -> tuple[torch.Tensor, dict[str, float]]:
-        """The training loss of ``pred`` (an image, or ``(image, convex part)`` with ``support_weight``)."""
-        convex = None
-        if isinstance(pred, tuple):
-            pred, convex = pred
-        pred = pred.float()
-        l1 = (pred - target).abs().mean()
-        ssim = self.ssim_loss(pred, target)
-        loss = l1 + self.data.ssim_weight * ssim
-        parts = {"l1": l1.item(), "ssim_loss": ssim.item()}
-        if self.data.offset_weight:
-            offset = (pred.mean(dim=(-2, -1)) - target.mean(dim=(-2, -1))).abs().mean()
-            loss = loss + self.data.offset_weight * offset
-        if self.data.support_weight:
-            if convex is None:
-                raise InputError("support_weight: the loss needs the convex part (forward with parts=True)")
-            support_l1 = (convex.float() - target).abs().mean()
-            loss = loss + self.data.support_weight * support_l1
-            parts["support_l1"] = support_l1.item()
-        if self.data.edge_ssim_weight:
-            import kornia
+        """The image terms of the loss of ``pred`` (an image, or ``(image, convex part)`` where a term
+        needs the convex part): those that need nothing but the image and the target."""
+        step = Step(task=self, index=-1, variant="single", inputs=[], target=target, autocast=contextlib.nullcontext)
+        step.image, step.convex = (pred if isinstance(pred, tuple) else (pred, None))
+        step.image = step.image.float()
+        return self._sum([(t, p) for t, p in self.terms if t.image_only], step)
 
-            ssim_map = kornia.metrics.ssim(pred, target, window_size=self.data.ssim_window, max_val=1.0)
-            edges = edge_mask(target).to(ssim_map.dtype)
-            edge_ssim = ((1.0 - ssim_map) / 2 * edges).sum() / edges.sum()
-            loss = loss + self.data.edge_ssim_weight * edge_ssim
-            parts["edge_ssim_loss"] = edge_ssim.item()
+    @staticmethod
+    def _sum(terms: Sequence[tuple[Any, dict[str, Any]]], step: Step) -> tuple[Any, dict[str, float]]:
+        """The terms' contributions added up in the registry's order, and what they log."""
+        loss: Any = 0.0
+        parts: dict[str, float] = {}
+        for term, params in terms:
+            value, logged = term.compute(step, **params)
+            if value is not None:
+                loss = loss + value
+            parts.update(logged)
         return loss, parts
 
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
@@ -598,49 +567,18 @@ class WindowTask:
         inputs, target = self.batch(step)
         t_data = time.perf_counter() - t0
         inputs, target = [x.to(self.device) for x in inputs], target.to(self.device)
-        supervised = self.gate_targets(step) if variant == "fusion" else None
-        gains: list[torch.Tensor] = []
-        forcing = self.data.gate_forcing
-
-        def capture(_module, _inputs, out: torch.Tensor) -> torch.Tensor | None:
-            gains.append(out)
-            if not forcing:
-                return None
-            value, mask = supervised
-            return torch.where(mask.bool(), value.to(out.dtype), out)  # the rest trains on the targets
-
-        hook = self.supervised_gate.register_forward_hook(capture) if supervised is not None else None
+        ctx = Step(task=self, index=step, variant=variant, inputs=inputs, target=target, autocast=autocast)
+        undo = [u for u in (t.before_forward(ctx, p) for t, p in self.terms if t.before_forward is not None)
+                if u is not None]
         try:
             with autocast():
-                pred = self.forward(inputs, variant, parts=bool(self.data.support_weight))
+                pred = self.forward(inputs, variant, parts=self.needs_convex)
         finally:
-            if hook is not None:
-                hook.remove()
-        loss, parts = self.loss(pred, target)
-        if supervised is not None:
-            value, mask = supervised
-            miss = ((gains[0].float() - value).square() * mask).sum() / mask.sum()
-            loss = loss + self.data.gate_target_weight * miss
-            parts["gate_target"] = miss.item()
-        if self.teacher is not None:
-            with autocast():
-                taught = self.teacher_image(inputs, variant).float()
-            image = (pred[0] if isinstance(pred, tuple) else pred).float()
-            distill = self.crop_losses(image, taught).mean()
-            loss = loss + self.spec.distill_weight * distill
-            parts["distill"] = distill.item()
-        weights = self.floor_weights(step) if variant == "fusion" else None
-        if weights is not None:
-            with torch.no_grad(), autocast():
-                floor = self.forward(inputs, "spike")
-            image = pred[0] if isinstance(pred, tuple) else pred
-            terms = self.data.spike_floor_terms
-            excess = (self.crop_losses(image, target, terms) - self.crop_losses(floor, target, terms)).clamp_min(0.0)
-            if isinstance(weights, torch.Tensor):
-                loss = loss + (weights * excess).mean()
-            else:  # (one weight: the sum as every spec before the noise weights computed it)
-                loss = loss + weights * excess.mean()
-            parts["spike_floor"] = excess.mean().item()
+            for u in undo:
+                u()
+        image, ctx.convex = pred if isinstance(pred, tuple) else (pred, None)
+        ctx.image = image.float()
+        loss, parts = self._sum(self.terms, ctx)
         return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
 
     @torch.no_grad()

@@ -1,4 +1,4 @@
-"""Distillation (``teacher`` + ``distill_weight``): the term is the student's crop losses against the
+"""Distillation (the ``distill`` loss term, its ``teacher`` and weight): the term is the student's crop losses against the
 teacher's image, zero when the student is the teacher, and a compact student learns from a full one."""
 
 import csv
@@ -24,9 +24,9 @@ def teacher(tmp_path_factory):
 
 
 def test_the_spec_refuses_half_a_distillation(tmp_path):
-    with pytest.raises(InputError, match="distill_weight > 0"):
+    with pytest.raises(InputError, match="weight > 0"):
         tiny_spec(tmp_path, teacher=str(tmp_path / "t.safetensors"))
-    with pytest.raises(InputError, match="needs a teacher"):
+    with pytest.raises(InputError, match="give its teacher"):
         tiny_spec(tmp_path, distill_weight=1.0)
     with pytest.raises(InputError, match="teacher: expected a .safetensors"):
         tiny_spec(tmp_path, teacher=str(tmp_path / "t.pt"), distill_weight=1.0)
@@ -74,7 +74,7 @@ def test_a_compact_student_trains_from_a_full_teacher_and_logs_the_term(tmp_path
     assert len(rows) == 4 and all(float(r["distill"]) > 0 for r in rows)
     card = json.loads((tmp_path / "run" / "neuspike-net.json").read_text())
     assert card["model"]["params"]["width"] == LITE_DESIGN["width"]
-    assert card["training"]["spec"]["teacher"] == str(weights)
+    assert card["training"]["spec"]["data"]["losses"]["distill"] == {"weight": 1.0, "teacher": str(weights)}
 
 
 def test_a_spike_only_teacher_cannot_teach_a_fusion_student(tmp_path, teacher, one_torch_thread):

@@ -123,8 +123,8 @@ def _old_window_folder(spec: TrainSpec) -> None:
     flat = {**{k: v for k, v in spec.as_dict().items() if k not in ("data", "optimizer", "export_dir")},
             "shard_dir": d.shard_dir, "view": d.view, "shard_size": d.train_items, "val_size": d.val_items,
             "light_range": list(d.light_range), "motions": list(d.motions), "noise_levels": list(d.noise_levels),
-            "photos": list(d.photos), "workers": d.workers, "ssim_weight": d.ssim_weight,
-            "ssim_window": d.ssim_window, "spike_only_fraction": d.spike_only_fraction}
+            "photos": list(d.photos), "workers": d.workers, "ssim_weight": d.losses["ssim"]["weight"],
+            "ssim_window": d.losses["ssim"]["window"], "spike_only_fraction": d.spike_only_fraction}
     (out / "spec.json").write_text(json.dumps(flat))
     rows = list(csv.DictReader(open(out / "train_log.csv")))
     old_cols = ("step", "kind", "loss", "l1", "ssim_loss", "lr", "seconds", "samples_per_s", "val_l1", "val_psnr",

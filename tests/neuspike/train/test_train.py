@@ -10,9 +10,17 @@ import torch
 from neuspike.errors import InputError
 from neuspike.train import TrainSpec, WindowData, learning_rate, load_spec
 from neuspike.train.loop import Trainer
+from neuspike.train.terms import LEGACY_FIELDS, legacy_losses
 from neuspike.train.windows import augment, draw_cell, load_sample, save_sample, simulate_cell
 
 DATA_FIELDS = set(WindowData.__dataclass_fields__)
+
+
+def window_data(**kw) -> WindowData:
+    """A data section from its fields and the earlier loss fields' names (read into the loss terms, as a
+    spec file of those fields is)."""
+    rest, losses = legacy_losses(kw, kw.pop("losses", None))
+    return WindowData(**rest, losses=losses)
 
 
 def tiny_spec(tmp_path, **kw) -> TrainSpec:
@@ -20,7 +28,7 @@ def tiny_spec(tmp_path, **kw) -> TrainSpec:
                 view=16, train_items=3, val_items=2, val_every=2, checkpoint_every=2, warmup=2, workers=1,
                 precision="float32", threads=1)
     base.update(kw)
-    data = WindowData(**{k: base.pop(k) for k in list(base) if k in DATA_FIELDS})
+    data = window_data(**{k: base.pop(k) for k in list(base) if k in DATA_FIELDS or k in LEGACY_FIELDS})
     return TrainSpec(data=data, **base)
 
 
@@ -401,14 +409,13 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     """A constant shift c of a crop costs offset_weight * |c| more than without the term; a crop whose
     level is right costs nothing more; the weight is checked and old specs mean 0."""
     from neuspike.methods import create
-    from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask
 
     method = create("neuspike-net-spike", precision="float32")
     gen = torch.Generator().manual_seed(0)
     target = torch.rand(2, 1, 24, 24, generator=gen) * 0.5 + 0.25
     shifted = target + torch.tensor([0.05, -0.02]).view(2, 1, 1, 1)
-    tasks = {w: WindowTask(TrainSpec(data=WindowData(offset_weight=w)), method) for w in (0.0, 3.0)}
+    tasks = {w: WindowTask(TrainSpec(data=window_data(offset_weight=w)), method) for w in (0.0, 3.0)}
     base, _ = tasks[0.0].loss(shifted, target)
     with_term, _ = tasks[3.0].loss(shifted, target)
     assert float(with_term - base) == pytest.approx(3.0 * (0.05 + 0.02) / 2, rel=1e-5)
@@ -416,27 +423,25 @@ def test_the_offset_term_adds_its_weight_times_the_error_of_each_crops_level():
     texture = texture - texture.mean(dim=(-2, -1), keepdim=True) + target.mean(dim=(-2, -1), keepdim=True)
     extra = tasks[3.0].loss(texture, target)[0] - tasks[0.0].loss(texture, target)[0]
     assert float(extra) == pytest.approx(0.0, abs=1e-6)
-    for bad in (-1.0, float("nan"), float("inf"), "1"):
-        with pytest.raises(InputError, match="offset_weight"):
-            WindowData(offset_weight=bad)
-    assert WindowData().offset_weight == 0.0
-    earlier = TrainSpec(data=WindowData()).as_dict()  # a spec file written before the term existed
-    del earlier["data"]["offset_weight"]
-    assert spec_from_dict(earlier).data.offset_weight == 0.0
+    _check_loss_weight_field("offset")
+    assert "offset" not in WindowData().losses
 
 
-def _check_loss_weight_field(name: str) -> None:
-    """A loss weight of WindowData: bad values refused by name, the shard key unchanged by it, and a
-    spec file written before the field existed reads as 0."""
+def _check_loss_weight_field(term: str) -> None:
+    """A loss term's weight: bad values refused by name, the shard key unchanged by it, a spec file
+    without the term has none, and the earlier field (``<term>_weight``) reads into the term."""
     from neuspike.train.spec import spec_from_dict
 
     for bad in (-0.1, float("nan"), float("inf"), "1", True):
-        with pytest.raises(InputError, match=name):
-            WindowData(**{name: bad})
-    assert WindowData(**{name: 0.5}).key(0) == WindowData().key(0)
+        with pytest.raises(InputError, match=f"losses.{term}.weight"):
+            WindowData(losses={term: bad})
+    assert WindowData(losses={term: 0.5}).key(0) == WindowData().key(0)
     earlier = TrainSpec(data=WindowData()).as_dict()
-    del earlier["data"][name]
-    assert getattr(spec_from_dict(earlier).data, name) == 0.0
+    assert term not in spec_from_dict(earlier).data.losses
+    earlier["data"].pop("losses")
+    earlier["data"][f"{term}_weight"] = 0.5  # a spec file of the earlier field
+    read = spec_from_dict(earlier).data.losses
+    assert read[term]["weight"] == 0.5 and {k: v for k, v in read.items() if k != term} == WindowData().losses
 
 
 def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_path, one_torch_thread):
@@ -451,7 +456,7 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     target = torch.rand(2, 1, 24, 24, generator=gen)
     image = target + 0.05 * torch.randn(2, 1, 24, 24, generator=gen)
     convex = target + 0.2 * torch.randn(2, 1, 24, 24, generator=gen)
-    tasks = {w: WindowTask(TrainSpec(data=WindowData(support_weight=w)), method) for w in (0.0, 0.5)}
+    tasks = {w: WindowTask(TrainSpec(data=window_data(support_weight=w)), method) for w in (0.0, 0.5)}
     base, _ = tasks[0.0].loss(image, target)
     with_term, parts = tasks[0.5].loss((image, convex), target)
     by_hand = float((convex - target).abs().mean())
@@ -459,12 +464,12 @@ def test_the_support_term_scores_the_convex_part_and_leaves_the_shard_key(tmp_pa
     assert float(with_term - base) == pytest.approx(0.5 * by_hand, rel=1e-5)
     with pytest.raises(InputError, match="convex part"):
         tasks[0.5].loss(image, target)
-    _check_loss_weight_field("support_weight")
+    _check_loss_weight_field("support")
     from neuspike.nets import DEFAULT_DESIGN, NeuSpikeNetMethod
 
     tanh = NeuSpikeNetMethod("neuspike-net", precision="float32", **{**DEFAULT_DESIGN, "spike_only": False, "head": "tanh"})
-    with pytest.raises(InputError, match="support_weight"):
-        WindowTask(TrainSpec(data=WindowData(support_weight=0.5)), tanh)
+    with pytest.raises(InputError, match="losses.support"):
+        WindowTask(TrainSpec(data=window_data(support_weight=0.5)), tanh)
 
     trainer = Trainer(tiny_spec(tmp_path, support_weight=0.5, steps=2, val_every=2), quiet=True)
     trainer.run()
@@ -493,7 +498,7 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     for i in range(2):
         assert np.array_equal(mask[i, 0].numpy(), report_edges(target[i, 0].numpy()))
     assert int(mask.sum()) == 2 * round(0.1 * 32 * 32)
-    tasks = {w: WindowTask(TrainSpec(data=WindowData(edge_ssim_weight=w)), method) for w in (0.0, 2.0)}
+    tasks = {w: WindowTask(TrainSpec(data=window_data(edge_ssim_weight=w)), method) for w in (0.0, 2.0)}
     base, _ = tasks[0.0].loss(pred, target)
     with_term, parts = tasks[2.0].loss(pred, target)
     ssim_map = kornia.metrics.ssim(pred, target, window_size=11, max_val=1.0)
@@ -505,7 +510,7 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     assert float(every) == pytest.approx(float(kornia.losses.SSIMLoss(window_size=11, max_val=1.0)(pred, target)),
                                          rel=1e-5)
     assert float(tasks[2.0].loss(target.clone(), target)[1]["edge_ssim_loss"]) == pytest.approx(0.0, abs=1e-6)
-    _check_loss_weight_field("edge_ssim_weight")
+    _check_loss_weight_field("edge_ssim")
 
 
 def test_the_crop_losses_average_to_the_main_loss():
@@ -513,7 +518,7 @@ def test_the_crop_losses_average_to_the_main_loss():
     from neuspike.methods import create
     from neuspike.train.windows import WindowTask
 
-    task = WindowTask(TrainSpec(data=WindowData(ssim_weight=0.7)), create("neuspike-net", precision="float32"))
+    task = WindowTask(TrainSpec(data=window_data(ssim_weight=0.7)), create("neuspike-net", precision="float32"))
     gen = torch.Generator().manual_seed(3)
     target = torch.rand(3, 1, 24, 24, generator=gen)
     pred = (target + 0.2 * torch.randn(3, 1, 24, 24, generator=gen)).clamp(0, 1)
@@ -531,9 +536,9 @@ def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_va
     from neuspike.methods import create
     from neuspike.train.windows import WindowTask
 
-    with pytest.raises(InputError, match="spike_floor_weight.*fusion networks only"):
-        WindowTask(TrainSpec(data=WindowData(spike_floor_weight=1.0)), create("neuspike-net-spike"))
-    _check_loss_weight_field("spike_floor_weight")
+    with pytest.raises(InputError, match="losses.spike_floor.*fusion networks only"):
+        WindowTask(TrainSpec(data=window_data(spike_floor_weight=1.0)), create("neuspike-net-spike"))
+    _check_loss_weight_field("spike_floor")
     spec = tiny_spec(tmp_path, spike_floor_weight=2.0, params={"motion_gate": "stats"})
     trainer = Trainer(spec, quiet=True)
     trainer.task.prepare(trainer._bar)
@@ -574,19 +579,15 @@ def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tm
     level read from its window as the simulator recorded it. Bad levels and weights are refused by name,
     the spec round-trips through JSON and the shard key does not change."""
     from neuspike.methods import create
-    from neuspike.train.__main__ import _level_weights
     from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask
 
     for bad in ({"loud": 1.0}, {"high": -1.0}, {"high": float("nan")}, {}, [("high", 1.0)]):
-        with pytest.raises(InputError, match="spike_floor_noise_weights"):
-            WindowData(spike_floor_noise_weights=bad)
-    with pytest.raises(InputError, match="spike_floor_noise_weights.*fusion networks only"):
-        WindowTask(TrainSpec(data=WindowData(spike_floor_noise_weights={"high": 1.0})), create("neuspike-net-spike"))
-    with pytest.raises(InputError, match="--spike-floor-noise-weights"):
-        _level_weights("high:8", "--spike-floor-noise-weights")
-    assert _level_weights("high=16, medium=8", "--f") == {"high": 16.0, "medium": 8.0}
-    assert WindowData(spike_floor_noise_weights={"high": 3}).key(0) == WindowData().key(0)
+        with pytest.raises(InputError, match="losses.spike_floor.noise_weights"):
+            window_data(spike_floor_noise_weights=bad)
+    with pytest.raises(InputError, match="losses.spike_floor.*fusion networks only"):
+        WindowTask(TrainSpec(data=window_data(spike_floor_noise_weights={"high": 1.0})), create("neuspike-net-spike"))
+    assert window_data(spike_floor_noise_weights={"high": 3}).key(0) == WindowData().key(0)
     spec = tiny_spec(tmp_path, batch=4, train_items=6, noise_levels=("none", "high"), spike_floor_weight=0.5,
                      spike_floor_noise_weights={"high": 4.0}, params={"motion_gate": "stats"})
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
@@ -630,11 +631,11 @@ def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_pa
     from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask
 
-    with pytest.raises(InputError, match="spike_floor_terms"):
-        WindowData(spike_floor_terms="l1")
-    with pytest.raises(InputError, match="spike_floor_terms 'ssim'.*fusion networks only"):
-        WindowTask(TrainSpec(data=WindowData(spike_floor_terms="ssim")), create("neuspike-net-spike"))
-    assert WindowData(spike_floor_terms="ssim").key(0) == WindowData().key(0)
+    with pytest.raises(InputError, match="losses.spike_floor.terms"):
+        window_data(spike_floor_terms="l1")
+    with pytest.raises(InputError, match="losses.spike_floor.*fusion networks only"):
+        WindowTask(TrainSpec(data=window_data(spike_floor_terms="ssim")), create("neuspike-net-spike"))
+    assert window_data(spike_floor_terms="ssim").key(0) == WindowData().key(0)
     small = dict(batch=4, train_items=6, params={"motion_gate": "stats"})
     spec = tiny_spec(tmp_path, spike_floor_weight=3.0, spike_floor_terms="ssim", **small)
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
@@ -657,7 +658,7 @@ def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_pa
             inputs, target = task.batch(step)
 
             def structure(image):
-                ssim_map = kornia.metrics.ssim(image.float(), target, window_size=spec.data.ssim_window,
+                ssim_map = kornia.metrics.ssim(image.float(), target, window_size=spec.data.losses["ssim"]["window"],
                                                max_val=1.0)
                 return ((1.0 - ssim_map) / 2).mean(dim=(1, 2, 3))
 
@@ -680,26 +681,22 @@ def test_gate_targets_add_the_mean_squared_miss_of_the_named_gains(tmp_path, one
     gate, bad targets and a missing weight are refused by name; the spec round-trips (also from the
     flag) and the shard key does not change."""
     from neuspike.methods import create
-    from neuspike.train.__main__ import _gate_targets
     from neuspike.train.method import training_method
     from neuspike.train.spec import spec_from_dict
     from neuspike.train.windows import WindowTask
 
     targets = {"none": {"3": 0.5}, "small": {"2": 0.25}, "medium": {"1": 0.2, "0": 1.5}, "high": {"1": 0.0}}
-    assert _gate_targets("none:3=0.5,small:2=0.25,medium:1=0.2,medium:0=1.5,high:1=0") == targets
-    with pytest.raises(InputError, match="--gate-targets"):
-        _gate_targets("high=0")
-    with pytest.raises(InputError, match="give both"):
-        WindowData(gate_targets=targets)
+    with pytest.raises(InputError, match="weight > 0"):
+        window_data(gate_targets=targets)
     with pytest.raises(InputError, match="unknown motion levels"):
-        WindowData(gate_targets={"high": {"4": 0.0}}, gate_target_weight=1.0)
+        window_data(gate_targets={"high": {"4": 0.0}}, gate_target_weight=1.0)
     with pytest.raises(InputError, match=r"gain in \[0, 2\)"):
-        WindowData(gate_targets={"high": {"1": 2.0}}, gate_target_weight=1.0)
+        window_data(gate_targets={"high": {"1": 2.0}}, gate_target_weight=1.0)
     on = dict(gate_targets=targets, gate_target_weight=2.5)
-    assert WindowData(**on).key(0) == WindowData().key(0)
-    no_gate = TrainSpec(data=WindowData(**on), params={"motion_gate": "none"})
+    assert window_data(**on).key(0) == WindowData().key(0)
+    no_gate = TrainSpec(data=window_data(**on), params={"motion_gate": "none"})
     for network in (create("neuspike-net-spike"), training_method(no_gate)):
-        with pytest.raises(InputError, match="no motion gate"):
+        with pytest.raises(InputError, match="no motion (gate|path)"):
             WindowTask(no_gate, network)
     small = dict(batch=4, train_items=8, noise_levels=("none", "small", "medium", "high"),
                  params={"motion_gate": "stats"})
@@ -765,8 +762,8 @@ def test_gate_forcing_trains_the_rest_on_the_targets_and_the_gate_on_its_miss(tm
     here; the other levels the gate's own), rebuilt here by patching the noise gate; the term is still the
     miss of the gate's own gains, and the gate gets gradient from that term alone on the forced gains.
     Forcing without targets is refused."""
-    with pytest.raises(InputError, match="gate_forcing"):
-        WindowData(gate_forcing=True)
+    with pytest.raises(InputError, match="losses.gate_target: give its targets"):
+        window_data(gate_forcing=True)
     targets = {"none": {"1": 1.0}, "small": {"1": 1.0}, "medium": {"1": 0.5}, "high": {"1": 0.0}}
     common = dict(batch=4, train_items=8, noise_levels=("none", "small", "medium", "high"),
                   params={"motion_gate": "stats-noise"})
@@ -912,9 +909,9 @@ def test_full_frame_validation_windows_keep_the_training_crops_and_the_old_shard
     trainer.task.load_validation()
     assert tuple(trainer.task.val_batch[1].shape) == (2, 1, 24, 40)
     assert load_spec(tmp_path / "run" / "spec.json").data.val_view == (40, 24)
-    args = build_parser().parse_args(["neuspike-net", "--val-view", "400x250", "--offset-weight", "2"])
+    args = build_parser().parse_args(["neuspike-net", "--val-view", "400x250", "--set", "data.losses.offset=2"])
     parsed = spec_from_args(args)
-    assert parsed.data.val_view == (400, 250) and parsed.data.offset_weight == 2.0
+    assert parsed.data.val_view == (400, 250) and parsed.data.losses["offset"] == {"weight": 2.0}
     with pytest.raises(InputError, match="--val-view: not for 'e2vid'"):
         spec_from_args(build_parser().parse_args(["e2vid", "--val-view", "400x250"]))
     for bad in ((8, 250), "400x250", (400,)):

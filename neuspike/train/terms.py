@@ -1,0 +1,374 @@
+"""The loss terms of single-window training: registered components with their own parameters.
+
+A window spec names the terms its loss adds up, each with its parameters (the data section's
+``losses``); a bare number is the term's weight, and what a spec leaves out keeps the term's default::
+
+    "losses": {"l1": 1, "ssim": {"weight": 1, "window": 11}, "offset": 0.5,
+               "spike_floor": {"weight": 2, "noise_weights": {"high": 16}}}
+
+``--set data.losses.offset=0.5`` sets one from the command line. The terms below are the registry
+(:data:`TERMS`, in the order the loss adds them up); a new experiment is one more :func:`register_term`
+call here: its parameters, their check, what it needs of the network (``setup``), and the function
+that computes it, not a spec field, a flag and a validator. This module imports nothing heavy: the
+spec checks a ``losses`` mapping against the registry without torch; the computations import torch
+when they run.
+
+Each term's ``compute(step, weight=..., **params)`` gets the :class:`Step` (the task, the step's
+variant, inputs, target, the network's image and, where a term asks for it, the support head's convex
+part) and returns ``(contribution, logged)``: the weighted tensor the loss adds (``None`` when the
+term does not apply to this step) and the numbers the training log records.
+
+The earlier spec fields (``ssim_weight``, ``offset_weight``, ``spike_floor_weight``, ``teacher`` with
+``distill_weight`` and the rest) are read into these terms by :func:`legacy_losses`, so every shipped
+card's spec still trains and loads.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from neuspike.errors import InputError
+
+__all__ = ["DEFAULT_LOSSES", "LEGACY_FIELDS", "LossTerm", "Step", "TERMS", "legacy_losses", "register_term",
+           "resolve_losses"]
+
+#: The noise levels a term may name (as :data:`neuspike.train.spec.NOISE_LEVELS`).
+_NOISE_LEVELS = ("none", "small", "medium", "high")
+
+
+@dataclass(frozen=True)
+class LossTerm:
+    """One registered loss term (module docstring).
+
+    ``defaults``: every parameter besides the weight, with its default; ``weight``: the default
+    weight when a spec names the term without one; ``check(params) -> params``: validates and
+    normalises the parameters (raising :class:`InputError`); ``setup(task, params)``: refuses a
+    network the term cannot score, and prepares what it needs (a teacher), once per run;
+    ``needs_convex``: the forward must return the support head's convex part; ``before_forward(step,
+    params) -> undo``: runs before the step's forward (a hook on the network), ``undo()`` after it.
+    """
+
+    name: str
+    compute: Callable[..., tuple[Any, dict[str, float]]]
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    weight: float = 1.0
+    check: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    setup: Callable[[Any, dict[str, Any]], None] | None = None
+    needs_convex: bool = False
+    before_forward: Callable[[Any, dict[str, Any]], Callable[[], None] | None] | None = None
+    #: The term needs only the image, the convex part and the target (:meth:`WindowTask.loss` computes it).
+    image_only: bool = False
+    doc: str = ""
+
+
+#: The registry, in the order the loss adds the terms up.
+TERMS: dict[str, LossTerm] = {}
+
+
+def register_term(term: LossTerm) -> LossTerm:
+    """Add ``term`` to :data:`TERMS` (a name registered twice is an error)."""
+    if term.name in TERMS:
+        raise InputError(f"loss term {term.name!r} is registered already")
+    TERMS[term.name] = term
+    return term
+
+
+@dataclass
+class Step:
+    """What a term sees of one training step (filled by :meth:`neuspike.train.windows.WindowTask.step_loss`)."""
+
+    task: Any
+    index: int
+    variant: str
+    inputs: list[Any]
+    target: Any
+    autocast: Callable[[], Any]
+    image: Any = None
+    convex: Any = None
+    #: What a ``before_forward`` hook captured, by term name.
+    captured: dict[str, Any] = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------------------------
+# The spec side: a ``losses`` mapping checked against the registry
+# ----------------------------------------------------------------------------------------------
+
+def _weight(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+        raise InputError(f"{where}: expected a finite weight >= 0, got {value!r}")
+    return float(value)
+
+
+def resolve_losses(losses: Any) -> dict[str, dict[str, Any]]:
+    """``losses`` checked and completed: ``{term: {"weight": w, **params}}`` in the registry's order,
+    every parameter given (defaults filled in), terms of weight 0 with nothing else set left out.
+
+    Raises
+    ------
+    InputError
+        Naming an unknown term (with the registered ones), an unknown parameter (with the term's), or
+        a bad value.
+    """
+    if not isinstance(losses, Mapping):
+        raise InputError(f"losses: expected {{term: weight or {{parameter: value}}}}, got {losses!r}")
+    unknown = sorted(set(losses) - set(TERMS))
+    if unknown:
+        raise InputError(f"losses: unknown terms {unknown}; the registered ones: {', '.join(TERMS)}")
+    out: dict[str, dict[str, Any]] = {}
+    for name, term in TERMS.items():
+        if name not in losses:
+            continue
+        given = losses[name]
+        given = {"weight": given} if not isinstance(given, Mapping) else dict(given)
+        bad = sorted(set(given) - set(term.defaults) - {"weight"})
+        if bad:
+            raise InputError(f"losses.{name}: unknown parameters {bad}; it takes weight"
+                             + "".join(f", {k}" for k in term.defaults))
+        params = {"weight": _weight(f"losses.{name}.weight", given.get("weight", term.weight)),
+                  **{k: given.get(k, v) for k, v in term.defaults.items()}}
+        if params["weight"] == 0 and all(params[k] == v for k, v in term.defaults.items()):
+            continue  # a term at weight 0 with its defaults adds nothing: as if not named
+        out[name] = term.check(params) if term.check is not None else params
+    return out
+
+
+#: The losses of a window spec that names none: L1 + the SSIM loss (window 11), as every spec before the registry.
+DEFAULT_LOSSES: dict[str, Any] = {"l1": 1.0, "ssim": {"weight": 1.0, "window": 11}}
+
+#: The earlier spec fields and the (term, parameter) each became.
+LEGACY_FIELDS: dict[str, tuple[str, str]] = {
+    "ssim_weight": ("ssim", "weight"), "ssim_window": ("ssim", "window"),
+    "offset_weight": ("offset", "weight"), "support_weight": ("support", "weight"),
+    "edge_ssim_weight": ("edge_ssim", "weight"),
+    "spike_floor_weight": ("spike_floor", "weight"), "spike_floor_noise_weights": ("spike_floor", "noise_weights"),
+    "spike_floor_terms": ("spike_floor", "terms"),
+    "gate_target_weight": ("gate_target", "weight"), "gate_targets": ("gate_target", "targets"),
+    "gate_forcing": ("gate_target", "forcing"),
+    "distill_weight": ("distill", "weight"), "teacher": ("distill", "teacher"),
+}
+
+
+def legacy_losses(section: Mapping[str, Any], losses: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Move the earlier fields of ``section`` into a ``losses`` mapping: ``(section without them, losses)``.
+
+    ``losses`` (the section's own, if any) starts from :data:`DEFAULT_LOSSES` where it is ``None``; an
+    earlier field sets its term's parameter (``None`` values, the earlier "not set", are skipped).
+    """
+    rest = dict(section)
+    out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v)
+                           for k, v in (DEFAULT_LOSSES if losses is None else losses).items()}
+    for key, (term, param) in LEGACY_FIELDS.items():
+        if key not in rest:
+            continue
+        value = rest.pop(key)
+        if value is None:
+            continue
+        current = out.get(term, {})
+        current = {"weight": current} if not isinstance(current, Mapping) else dict(current)
+        current[param] = value
+        if term == "ssim" and "weight" not in current:
+            current["weight"] = 1.0
+        if term in ("spike_floor", "gate_target", "distill", "offset", "support", "edge_ssim") and "weight" not in current:
+            current["weight"] = 0.0
+        out[term] = current
+    return rest, out
+
+
+# ----------------------------------------------------------------------------------------------
+# The terms
+# ----------------------------------------------------------------------------------------------
+
+def _l1(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
+    l1 = (step.image - step.target).abs().mean()
+    return weight * l1, {"l1": l1.item()}
+
+
+def _ssim(step: Step, *, weight: float, window: int) -> tuple[Any, dict[str, float]]:
+    ssim = step.task.ssim_loss(step.image, step.target)
+    return weight * ssim, {"ssim_loss": ssim.item()}
+
+
+def _check_window(params: dict[str, Any]) -> dict[str, Any]:
+    window = params["window"]
+    if isinstance(window, bool) or not isinstance(window, int) or window < 3 or window % 2 == 0:
+        raise InputError(f"losses.ssim.window: expected an odd whole number >= 3, got {window!r}")
+    return params
+
+
+def _offset(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
+    image, target = step.image, step.target
+    offset = (image.mean(dim=(-2, -1)) - target.mean(dim=(-2, -1))).abs().mean()
+    return weight * offset, {}
+
+
+def _support(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
+    if step.convex is None:
+        raise InputError("losses.support: the loss needs the convex part (forward with parts=True)")
+    support_l1 = (step.convex.float() - step.target).abs().mean()
+    return weight * support_l1, {"support_l1": support_l1.item()}
+
+
+def _support_setup(task: Any, params: dict[str, Any]) -> None:
+    if getattr(task.module, "head", "tanh") == "tanh":
+        raise InputError(f"losses.support {params['weight']}: the network's head has no convex part to score (give a "
+                         "'support' or 'support-count' head, or leave the term out)")
+
+
+def _edge_ssim(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
+    import kornia
+
+    from neuspike.train.windows import edge_mask
+
+    ssim_map = kornia.metrics.ssim(step.image, step.target, window_size=step.task.ssim_window, max_val=1.0)
+    edges = edge_mask(step.target).to(ssim_map.dtype)
+    edge_ssim = ((1.0 - ssim_map) / 2 * edges).sum() / edges.sum()
+    return weight * edge_ssim, {"edge_ssim_loss": edge_ssim.item()}
+
+
+def _fusion_only(task: Any, what: str) -> None:
+    if not task.fusion:
+        raise InputError(f"{what}: fusion networks only (the network has no motion path)")
+
+
+def _check_gate(params: dict[str, Any]) -> dict[str, Any]:
+    from neuspike.train.spec import gate_targets
+
+    if params["targets"] is None:
+        raise InputError("losses.gate_target: give its targets ({noise level: {motion level: gain}})")
+    if not params["weight"] > 0:
+        raise InputError("losses.gate_target: give a weight > 0 with the targets")
+    if not isinstance(params["forcing"], bool):
+        raise InputError(f"losses.gate_target.forcing: expected true or false, got {params['forcing']!r}")
+    return {**params, "targets": gate_targets(params["targets"])}
+
+
+def _gate_setup(task: Any, params: dict[str, Any]) -> None:
+    _fusion_only(task, "losses.gate_target")
+    if task.supervised_gate is None:
+        raise InputError("losses.gate_target: the network has no motion gate to supervise (a fusion network with "
+                         "params motion_gate 'stats', 'stats-local' or 'stats-noise')")
+
+
+def _gate_before(step: Step, params: dict[str, Any]) -> Callable[[], None] | None:
+    """Capture the supervised gate's gains of a fusion step (and with ``forcing``, replace those that
+    have a target by the target: the rest of the network trains on the gains the targets say)."""
+    if step.variant != "fusion":
+        return None
+    supervised = step.task.gate_targets(step.index, params["targets"])
+    if supervised is None:
+        return None
+    gains: list[Any] = []
+    forcing = params["forcing"]
+
+    def capture(_module: Any, _inputs: Any, out: Any) -> Any:
+        gains.append(out)
+        if not forcing:
+            return None
+        import torch
+
+        value, mask = supervised
+        return torch.where(mask.bool(), value.to(out.dtype), out)
+
+    step.captured["gate_target"] = (supervised, gains)
+    return step.task.supervised_gate.register_forward_hook(capture).remove
+
+
+def _gate_target(step: Step, *, weight: float, targets: Any, forcing: bool) -> tuple[Any, dict[str, float]]:
+    if "gate_target" not in step.captured:
+        return None, {}
+    (value, mask), gains = step.captured["gate_target"]
+    miss = ((gains[0].float() - value).square() * mask).sum() / mask.sum()
+    return weight * miss, {"gate_target": miss.item()}
+
+
+def _check_distill(params: dict[str, Any]) -> dict[str, Any]:
+    teacher = params["teacher"]
+    if teacher is None:
+        raise InputError("losses.distill: give its teacher (a trained network's .safetensors with its JSON card)")
+    if not str(teacher).endswith(".safetensors"):
+        raise InputError(f"losses.distill.teacher: expected a .safetensors file, got {teacher!r}")
+    if not params["weight"] > 0:
+        raise InputError("losses.distill: give a weight > 0 (the weight of the teacher's term)")
+    return {**params, "teacher": str(teacher)}
+
+
+def _distill_setup(task: Any, params: dict[str, Any]) -> None:
+    task.teacher = task.load_teacher(params["teacher"])
+
+
+def _distill(step: Step, *, weight: float, teacher: str) -> tuple[Any, dict[str, float]]:
+    with step.autocast():
+        taught = step.task.teacher_image(step.inputs, step.variant).float()
+    distill = step.task.crop_losses(step.image.float(), taught).mean()
+    return weight * distill, {"distill": distill.item()}
+
+
+def _check_floor(params: dict[str, Any]) -> dict[str, Any]:
+    if params["terms"] not in ("both", "ssim"):
+        raise InputError(f"losses.spike_floor.terms: expected both or ssim, got {params['terms']!r}")
+    w = params["noise_weights"]
+    if w is not None:
+        if not isinstance(w, Mapping) or not w:
+            raise InputError("losses.spike_floor.noise_weights: expected {noise level: weight} with at least one "
+                             f"level, got {w!r}")
+        bad = sorted(set(w) - set(_NOISE_LEVELS))
+        if bad:
+            raise InputError(f"losses.spike_floor.noise_weights: unknown noise levels {bad}; choose from "
+                             f"{', '.join(_NOISE_LEVELS)}")
+        params = {**params, "noise_weights": {k: _weight(f"losses.spike_floor.noise_weights[{k!r}]", w[k])
+                                              for k in _NOISE_LEVELS if k in w}}
+    return params
+
+
+def _floor_setup(task: Any, params: dict[str, Any]) -> None:
+    _fusion_only(task, "losses.spike_floor")
+
+
+def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str) -> tuple[Any, dict[str, float]]:
+    import torch
+
+    if step.variant != "fusion":
+        return None, {}
+    task = step.task
+    if noise_weights is None:
+        weights: Any = weight or None
+    else:
+        w = [noise_weights.get(level, weight) for level in task.noise_levels(step.index)]
+        weights = torch.tensor(w, dtype=torch.float32, device=task.device) if any(w) else None
+    if weights is None:
+        return None, {}
+    with torch.no_grad(), step.autocast():
+        floor = task.forward(step.inputs, "spike")
+    excess = (task.crop_losses(step.image, step.target, terms)
+              - task.crop_losses(floor, step.target, terms)).clamp_min(0.0)
+    if isinstance(weights, torch.Tensor):
+        value = (weights * excess).mean()
+    else:  # (one weight: the sum as every spec before the noise weights computed it)
+        value = weights * excess.mean()
+    return value, {"spike_floor": excess.mean().item()}
+
+
+register_term(LossTerm("l1", _l1, image_only=True, doc="mean absolute error of the image"))
+register_term(LossTerm("ssim", _ssim, image_only=True, defaults={"window": 11}, check=_check_window,
+                       doc="kornia's SSIM loss (1 - SSIM) / 2 over windows of the given side, data range 1"))
+register_term(LossTerm("offset", _offset, image_only=True, weight=0.0,
+                       doc="|mean(image) - mean(truth)| per crop, averaged: an error of the whole image's level, to "
+                           "which the SSIM term is blind"))
+register_term(LossTerm("support", _support, image_only=True, weight=0.0, setup=_support_setup, needs_convex=True,
+                       doc="mean absolute error of the support head's convex part (before the correction)"))
+register_term(LossTerm("edge_ssim", _edge_ssim, image_only=True, weight=0.0,
+                       doc="the SSIM loss over each crop's edge pixels only (the top 10 % of the truth's gradient)"))
+register_term(LossTerm("gate_target", _gate_target, defaults={"targets": None, "forcing": False}, weight=0.0,
+                       check=_check_gate, setup=_gate_setup, before_forward=_gate_before,
+                       doc="fusion steps: mean squared miss of the motion (or noise) gate's gains against targets "
+                           "per noise level and motion level; with forcing the forward uses the targets"))
+register_term(LossTerm("distill", _distill, defaults={"teacher": None}, weight=0.0, check=_check_distill,
+                       setup=_distill_setup,
+                       doc="the student's L1 + SSIM-term loss against a trained network's image (the teacher, run on "
+                           "each step's inputs in the step's variant)"))
+register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": None, "terms": "both"}, weight=0.0,
+                       check=_check_floor, setup=_floor_setup,
+                       doc="fusion steps: relu(l_fusion - l_spike) per crop, l a crop's L1 + SSIM-term loss (terms "
+                           "'both') or SSIM loss alone ('ssim'), weighted per crop by its noise level's weight"))
