@@ -30,6 +30,12 @@ from bench.harness.results import read_csv
 from bench.reporting.tables import axis_label, axis_means, crossed_axes, swept_axes
 
 NET, SPIKE = "neuspike-net", "neuspike-net-spike"
+#: The compact variants and the full network each is held to.
+LITE = {"neuspike-net-lite": NET, "neuspike-net-spike-lite": SPIKE}
+#: The networks trained here: never a rival of one another in the margins.
+OURS = (NET, SPIKE, *LITE)
+#: The networks not trained here (the rest are classical methods).
+PUBLISHED_NETS = ("e2vid", "firenet-sim", "firenet", "firenet-plus")
 
 
 def _point_table(frame: pd.DataFrame, axis: str) -> str:
@@ -41,7 +47,7 @@ def _point_table(frame: pd.DataFrame, axis: str) -> str:
             return f"`{NET}` has no ok rows in this sweep.\n"
         digits = 2 if metric == "psnr" else 3
         for v in wide.columns:
-            others = wide.loc[[m for m in wide.index if m not in (NET, SPIKE)], v].dropna()
+            others = wide.loc[[m for m in wide.index if m not in OURS], v].dropna()
             best = others.idxmax()
             ours = wide.loc[NET, v]
             margin = ours - others.max()
@@ -101,6 +107,37 @@ def _targets(frame: pd.DataFrame, axis: str) -> str:
     return "Targets at each point:\n\n" + "\n".join(lines) + "\n"
 
 
+def _lite(frame: pd.DataFrame, axis: str) -> str:
+    """Each compact variant against its full network (within 0.5 dB PSNR and 0.005 SSIM) and against the
+    best classical method that reads nothing it does not read (above it), per point, each marked met
+    (yes) or missed (NO)."""
+    wide = {m: axis_means(frame, axis, m) for m in ("psnr", "ssim")}
+    present = [m for m in LITE if m in wide["psnr"].index and LITE[m] in wide["psnr"].index]
+    if not present:
+        return ""
+    classical = [m for m in wide["psnr"].index if m not in OURS and m not in PUBLISHED_NETS]
+    inputs = frame.groupby("method")["inputs"].first().astype(str)
+    lines = [f"| {axis} | network | - full PSNR | - full SSIM | - best classical PSNR | - best classical SSIM |",
+             "|---|---|---:|---:|---:|---:|"]
+
+    def mark(ok: bool) -> str:
+        return "yes" if ok else "**NO**"
+
+    for v in wide["psnr"].columns:
+        for lite in present:
+            full = LITE[lite]
+            # the rivals: classical methods that read nothing the network does not read
+            mine = set(inputs[lite].split("+"))
+            rivals = [m for m in classical if set(inputs[m].split("+")) <= mine]
+            dp = wide["psnr"].loc[lite, v] - wide["psnr"].loc[full, v]
+            ds = wide["ssim"].loc[lite, v] - wide["ssim"].loc[full, v]
+            cp = wide["psnr"].loc[lite, v] - wide["psnr"].loc[rivals, v].max()
+            cs = wide["ssim"].loc[lite, v] - wide["ssim"].loc[rivals, v].max()
+            lines.append(f"| {axis_label(axis, v)} | `{lite}` | {dp:+.2f} {mark(dp >= -0.5)} | {ds:+.4f} {mark(ds >= -0.005)} "
+                         f"| {cp:+.2f} {mark(cp > 0)} | {cs:+.3f} {mark(cs > 0)} |")
+    return "Compact networks at each point:\n\n" + "\n".join(lines) + "\n"
+
+
 def _sections(frame: pd.DataFrame, folder: str) -> list[tuple[str, pd.DataFrame, str]]:
     """(heading, rows, axis) for each table: every swept axis, or the light axis at each noise level."""
     crossed = crossed_axes(frame)
@@ -125,11 +162,14 @@ def margins_markdown(folders: list[str | Path]) -> str:
             out.append(_point_table(frame, axis))
             out.append("\n" + _fusion_gain(frame, axis))
             out.append("\n" + _targets(frame, axis))
+            lite = _lite(frame, axis)
+            if lite:
+                out.append("\n" + lite)
             if axis == "noise":
                 wide = axis_means(frame, axis, "psnr")
                 if NET in wide.index and {"small", "high"} <= set(wide.columns):
                     lost = {m: wide.loc[m, "small"] - wide.loc[m, "high"] for m in wide.index}
-                    best = min((m for m in lost if m not in (NET, SPIKE)), key=lambda m: lost[m])
+                    best = min((m for m in lost if m not in OURS), key=lambda m: lost[m])
                     out.append(f"\nPSNR lost from small to high noise: `{NET}` {lost[NET]:.2f} dB, `{SPIKE}` "
                                f"{lost.get(SPIKE, float('nan')):.2f} dB; least among the others: `{best}` "
                                f"{lost[best]:.2f} dB.\n")
