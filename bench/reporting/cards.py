@@ -19,9 +19,12 @@ from pathlib import Path
 
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
-NETWORKS = ("neuspike-net", "neuspike-net-spike", "e2vid", "firenet-sim")
+ROOT = Path(__file__).resolve().parents[2]  # the repository (bench/reporting/cards.py)
+NETWORKS = ("neuspike-net", "neuspike-net-spike", "neuspike-net-lite", "neuspike-net-spike-lite", "e2vid",
+            "firenet-sim")
 OURS = set(NETWORKS)
+#: The networks whose training history is in the tree: their campaign's folder.
+CAMPAIGNS = {"neuspike-net-lite": "campaigns/neuspike-net-lite", "neuspike-net-spike-lite": "campaigns/neuspike-net-lite"}
 #: The last commit whose tree holds the training history of the shipped networks, and each one's folder there.
 HISTORY_COMMIT = "61a150f81431d38169df37943aa4282840d07702"
 HISTORY = {"neuspike-net": "reports/neuspike-net", "neuspike-net-spike": "reports/neuspike-net",
@@ -77,6 +80,9 @@ def _history_paths(text: str) -> str:
 def card(name: str, root: Path = ROOT) -> str:
     meta = json.loads((root / "neuspike" / "trained" / f"{name}.json").read_text())
     training, data = meta.get("training", {}), meta.get("data", {})
+    trained = str(training.get("spec", {}).get("method", name))  # the method the trainer was run for
+    # the run's file of this variant (one run of a fusion network exports its spike-only variant too)
+    export = f"{trained}-spike" if name.removesuffix("-lite").endswith("-spike") and trained != name else trained
     model = meta.get("model", {})
     lines = [
         f"# `{name}`: model card",
@@ -90,16 +96,23 @@ def card(name: str, root: Path = ROOT) -> str:
                           if meta.get("stages") else f"{training.get('step', '?')} steps")
         + f"; the last stage ran at commit `{str(training.get('commit', '?'))[:12]}` on {training.get('device', '?')} "
           f"in {training.get('precision', '?')} ({float(training.get('wall_s', 0)) / 60:.0f} min).",
-        f"**Command:** `python -m neuspike.train {name} --spec spec.json`, the spec written out of the JSON card "
+        f"**Command:** `python -m neuspike.train {trained} --spec spec.json`, the spec written out of the JSON card "
         f"with `python -c \"import json; print(json.dumps(json.load(open('neuspike/trained/{name}.json'))['training']"
-        f"['spec']))\" > spec.json`. A run writes into `runs/` only; `--export` replaces this file.",
+        f"['spec']))\" > spec.json`. A run writes into `runs/` only"
+        + (f"; it trains the fusion network and its spike-only variant in the same weights and exports both (its "
+           f"`{export}.safetensors` is this file)" if export != trained else "")
+        + (f"; `--export` would replace the full network's files: leave it out, and copy the run's `{export}` files "
+           f"to `{name}.safetensors` and `{name}.json`" if name.endswith("-lite") else "; `--export` replaces this file")
+        + ".",
         *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`), at commit "
            f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
            f".safetensors > start.safetensors` (its card likewise), then point the spec's `init_from` at it."]
           if isinstance(meta.get("previous"), dict) and meta["previous"].get("commit") else []),
-        f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
-        f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
-        "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`).",
+        (f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
+         f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
+         "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`)."
+         if name in HISTORY else
+         f"**History:** its training campaign, its runs and what was tried: [`{CAMPAIGNS[name]}`](../../{CAMPAIGNS[name]}/README.md)."),
         f"**Data:** simulated {data.get('kind', '?')} from the training photographs "
         f"({', '.join(data.get('photos', []))})" + (f" and procedural {data['procedural']}" if data.get("procedural") else "")
         + (f" (scene kinds {', '.join(dict.fromkeys(data['kinds']))})" if data.get("kinds") else "")
@@ -117,12 +130,13 @@ def card(name: str, root: Path = ROOT) -> str:
 
 
 def write_cards(names: list[str] | None = None, root: Path = ROOT) -> list[Path]:
-    """Write ``neuspike/trained/<network>.md`` for these networks (default: every shipped one) from the
+    """Write ``neuspike/trained/<network>.md`` for these networks (default: every one shipped, with its JSON card) from the
     reports under ``root``; return the paths written."""
     from neuspike.utils.atomic import write_text
 
     written = []
-    for name in names or list(NETWORKS):
+    shipped = [n for n in NETWORKS if (root / "neuspike" / "trained" / f"{n}.json").is_file()]
+    for name in names or shipped:
         if name not in NETWORKS:
             raise ValueError(f"no model card for {name!r}; the networks trained here: {', '.join(NETWORKS)}")
         path = root / "neuspike" / "trained" / f"{name}.md"
