@@ -22,6 +22,7 @@ from torch import nn
 
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
+from neuspike.methods.readout import despeckle
 from neuspike.nets.fusion import FUSIONS
 from neuspike.nets.network import HEADS, KEY_ESTIMATES, MOTION_GATES, SUPPORT_CUES, TRANSFORMERS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
@@ -162,6 +163,11 @@ class NeuSpikeNetMethod(LearnedMethod):
         The network's width multiplier and prediction kernel (:class:`~neuspike.nets.network.NeuSpikeNet`):
         1 and 3 (the defaults) are the full network; the compact variants take ``LITE_DESIGN``. Kept out of
         ``params`` at their defaults, so the full networks' parameters read as they always have.
+    despeckle : float
+        0 (off, the default of the class) or a margin in the image's units: isolated outliers, pixels
+        beyond all eight neighbours' range by more than it, are replaced by their 3x3 median after the
+        level (:func:`neuspike.methods.readout.despeckle`). The registered networks use
+        :data:`neuspike.nets.DESPECKLE`. Kept out of ``params`` when off.
     level : str
         ``"counts"`` (default): where the sensor's gain is known, the image is shifted so that the
         spikes it predicts, pixel by pixel under the sensor model of how the window began
@@ -181,7 +187,7 @@ class NeuSpikeNetMethod(LearnedMethod):
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
                  motion_gate: str = "none", transformer: str = "fixed", support_cue: str = "none",
                  key_estimates: str = "none", level: str = "counts", width: float = 1.0, head_kernel: int = 3,
-                 **learned: Any) -> None:
+                 despeckle: float = 0.0, **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
                            transformer=transformer, support_cue=support_cue, key_estimates=key_estimates))
@@ -192,6 +198,10 @@ class NeuSpikeNetMethod(LearnedMethod):
             learned["width"] = width
         if head_kernel != 3:
             learned["head_kernel"] = head_kernel
+        if isinstance(despeckle, bool) or not isinstance(despeckle, (int, float)) or not 0 <= despeckle < 1:
+            raise InputError(f"despeckle: expected a margin in [0, 1) (0 = off), got {despeckle!r}")
+        if despeckle:
+            learned["despeckle"] = float(despeckle)
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
@@ -268,8 +278,13 @@ class NeuSpikeNetMethod(LearnedMethod):
     def to_image(self, output: torch.Tensor, sample: Sample) -> np.ndarray:
         """The clamped output, shifted so that it predicts the window's spike count (``level="counts"``,
         where the gain is known): :func:`neuspike.methods.counting.level_shift` under the sensor model of
-        how the window began."""
-        image = super().to_image(output, sample)
+        how the window began; then, with ``despeckle``, its isolated outliers replaced by their 3x3 median
+        (:func:`neuspike.methods.readout.despeckle`)."""
+        image = self._leveled(super().to_image(output, sample), sample)
+        margin = self.params.get("despeckle", 0.0)
+        return despeckle(image, margin) if margin else image
+
+    def _leveled(self, image: np.ndarray, sample: Sample) -> np.ndarray:
         self._level = None
         spikes = sample.spikes
         if self.params.get("level", "counts") != "counts" or spikes is None or spike_gain(sample)[1] != "known":
@@ -288,6 +303,8 @@ class NeuSpikeNetMethod(LearnedMethod):
             label = f"{label}; {COUNTED}" + (", dark rate estimated" if self._dark_how == DARK_ESTIMATED else "")
         if spike_gain(sample)[1] == "estimated":  # a real recording: say how its scale was set
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
+        if self.params.get("despeckle"):
+            label = f"{label}; despeckled (margin {self.params['despeckle']:g})"
         return image, label
 
     def load_weights(self, module: nn.Module, path: Path, *, may_lack: tuple[str, ...] = ()) -> str | None:
