@@ -264,6 +264,13 @@ def rerun(entry: Entry, reports: Path, weights: str, work: Path) -> None:
             shutil.copytree(src, staged / name)
         elif src.is_file():
             shutil.copy(src, staged / name)
+    # figures the folder holds that its results cannot rebuild (a dataset's contact sheets need the run's
+    # images): each is carried over, replaced by the run's own version where the run drew it again
+    if (target / "figures").is_dir():
+        (staged / "figures").mkdir(exist_ok=True)
+        for figure in sorted((target / "figures").iterdir()):
+            fresh = out / "figures" / figure.name
+            shutil.copy(fresh if fresh.is_file() else figure, staged / "figures" / figure.name)
     if (out / "results.csv").is_file():
         gzipped = entry.kind != "dataset"
         if gzipped:

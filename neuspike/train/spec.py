@@ -93,38 +93,6 @@ def _check_levels(levels: Any) -> tuple[str, ...]:
 DEFAULT_SPEED_RANGE = (100.0, 4000.0)
 
 
-#: The motion levels a gate target may name (x_m^0 .. x_m^3).
-GATE_LEVELS = ("0", "1", "2", "3")
-
-
-def gate_targets(value: Any) -> dict[str, dict[str, float]]:
-    """The ``gate_target`` loss term's targets checked: {noise level: {motion level: gain in [0, 2)}}, in
-    NOISE_LEVELS and level order."""
-    shape = "{noise level: {motion level '0'..'3': gain in [0, 2)}}"
-    if not isinstance(value, dict) or not value:
-        raise InputError(f"gate_targets: expected {shape} with at least one level, got {value!r}")
-    bad = sorted(set(value) - set(NOISE_LEVELS))
-    if bad:
-        raise InputError(f"gate_targets: unknown noise levels {bad}; choose from {', '.join(NOISE_LEVELS)}")
-    out: dict[str, dict[str, float]] = {}
-    for noise in (n for n in NOISE_LEVELS if n in value):
-        gains = value[noise]
-        if not isinstance(gains, dict) or not gains:
-            raise InputError(f"gate_targets[{noise!r}]: expected {{motion level: gain}} with at least one level, "
-                             f"got {gains!r}")
-        levels = {str(k): v for k, v in gains.items()}
-        bad = sorted(set(levels) - set(GATE_LEVELS))
-        if bad:
-            raise InputError(f"gate_targets[{noise!r}]: unknown motion levels {bad}; choose from "
-                             f"{', '.join(GATE_LEVELS)} (x_m^0 .. x_m^3)")
-        for k, v in levels.items():
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= float(v) < 2.0:
-                raise InputError(f"gate_targets[{noise!r}][{k!r}]: expected a gain in [0, 2) (the gate's range), "
-                                 f"got {v!r}")
-        out[noise] = {k: float(levels[k]) for k in GATE_LEVELS if k in levels}
-    return out
-
-
 @dataclass(frozen=True)
 class WindowData:
     """Single simulated windows (feed-forward networks), and how they are scored.

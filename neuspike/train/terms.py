@@ -31,8 +31,8 @@ from typing import Any, Callable, Mapping
 
 from neuspike.errors import InputError
 
-__all__ = ["DEFAULT_LOSSES", "LEGACY_FIELDS", "LossTerm", "Step", "TERMS", "legacy_losses", "register_term",
-           "resolve_losses"]
+__all__ = ["DEFAULT_LOSSES", "LEGACY_FIELDS", "LossTerm", "Step", "TERMS", "edge_mask", "gate_targets", "legacy_losses",
+           "register_term", "resolve_losses"]
 
 #: The noise levels a term may name (as :data:`neuspike.train.spec.NOISE_LEVELS`).
 _NOISE_LEVELS = ("none", "small", "medium", "high")
@@ -180,6 +180,55 @@ def legacy_losses(section: Mapping[str, Any], losses: Any = None) -> tuple[dict[
 # The terms
 # ----------------------------------------------------------------------------------------------
 
+#: The motion levels a gate target may name (x_m^0 .. x_m^3).
+GATE_LEVELS = ("0", "1", "2", "3")
+
+
+def gate_targets(value: Any) -> dict[str, dict[str, float]]:
+    """The ``gate_target`` loss term's targets checked: {noise level: {motion level: gain in [0, 2)}}, in
+    _NOISE_LEVELS and level order."""
+    shape = "{noise level: {motion level '0'..'3': gain in [0, 2)}}"
+    if not isinstance(value, dict) or not value:
+        raise InputError(f"gate_targets: expected {shape} with at least one level, got {value!r}")
+    bad = sorted(set(value) - set(_NOISE_LEVELS))
+    if bad:
+        raise InputError(f"gate_targets: unknown noise levels {bad}; choose from {', '.join(_NOISE_LEVELS)}")
+    out: dict[str, dict[str, float]] = {}
+    for noise in (n for n in _NOISE_LEVELS if n in value):
+        gains = value[noise]
+        if not isinstance(gains, dict) or not gains:
+            raise InputError(f"gate_targets[{noise!r}]: expected {{motion level: gain}} with at least one level, "
+                             f"got {gains!r}")
+        levels = {str(k): v for k, v in gains.items()}
+        bad = sorted(set(levels) - set(GATE_LEVELS))
+        if bad:
+            raise InputError(f"gate_targets[{noise!r}]: unknown motion levels {bad}; choose from "
+                             f"{', '.join(GATE_LEVELS)} (x_m^0 .. x_m^3)")
+        for k, v in levels.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= float(v) < 2.0:
+                raise InputError(f"gate_targets[{noise!r}][{k!r}]: expected a gain in [0, 2) (the gate's range), "
+                                 f"got {v!r}")
+        out[noise] = {k: float(levels[k]) for k in GATE_LEVELS if k in levels}
+    return out
+
+
+#: Share of a crop's pixels that :func:`edge_mask` marks (the fast-motion report's edge share).
+EDGE_SHARE = 0.1
+
+
+def edge_mask(target: Any, share: float = EDGE_SHARE) -> Any:
+    """Boolean (B, 1, H, W): per crop, the pixels whose gradient magnitude (central differences inside,
+    one-sided at the border, as ``numpy.gradient``) is in the crop's top ``share`` (at least one): the
+    mask of ``bench.fast_motion.edge_mask``, batched in torch for the loss (the test holds them equal)."""
+    import torch
+
+    gy, gx = torch.gradient(target.double(), dim=(-2, -1))
+    magnitude = torch.hypot(gx, gy).flatten(1)
+    count = max(1, int(round(share * magnitude.shape[1])))
+    threshold = magnitude.topk(count, dim=1).values[:, -1:]
+    return (magnitude >= threshold).view_as(target)
+
+
 def _l1(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
     l1 = (step.image - step.target).abs().mean()
     return weight * l1, {"l1": l1.item()}
@@ -219,8 +268,6 @@ def _support_setup(task: Any, params: dict[str, Any]) -> None:
 def _edge_ssim(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
     import kornia
 
-    from neuspike.train.windows import edge_mask
-
     ssim_map = kornia.metrics.ssim(step.image, step.target, window_size=step.task.ssim_window, max_val=1.0)
     edges = edge_mask(step.target).to(ssim_map.dtype)
     edge_ssim = ((1.0 - ssim_map) / 2 * edges).sum() / edges.sum()
@@ -233,8 +280,6 @@ def _fusion_only(task: Any, what: str) -> None:
 
 
 def _check_gate(params: dict[str, Any]) -> dict[str, Any]:
-    from neuspike.train.spec import gate_targets
-
     if params["targets"] is None:
         raise InputError("losses.gate_target: give its targets ({noise level: {motion level: gain}})")
     if not params["weight"] > 0:

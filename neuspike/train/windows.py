@@ -50,7 +50,7 @@ from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.train.spec import KIND_WEIGHTS, SWEEP_GRIDS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
-from neuspike.train.terms import TERMS, Step
+from neuspike.train.terms import TERMS, Step, edge_mask  # noqa: F401  (edge_mask lives with the loss)
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
@@ -297,21 +297,6 @@ def augment(tensors: Sequence[torch.Tensor], rng: np.random.Generator, crop: int
 
 #: Module tensors only the fusion network has (left out of the spike-only export).
 MOTION_PREFIXES = ("motion.", "fuse1.", "fuse2.", "motion_gate.", "local_gate.", "noise_gate.", "event_transformer.")
-
-
-#: Share of a crop's pixels that :func:`edge_mask` marks (the fast-motion report's edge share).
-EDGE_SHARE = 0.1
-
-
-def edge_mask(target: torch.Tensor, share: float = EDGE_SHARE) -> torch.Tensor:
-    """Boolean (B, 1, H, W): per crop, the pixels whose gradient magnitude (central differences inside,
-    one-sided at the border, as ``numpy.gradient``) is in the crop's top ``share`` (at least one): the
-    mask of ``bench.fast_motion.edge_mask``, batched in torch for the loss (the test holds them equal)."""
-    gy, gx = torch.gradient(target.double(), dim=(-2, -1))
-    magnitude = torch.hypot(gx, gy).flatten(1)
-    count = max(1, int(round(share * magnitude.shape[1])))
-    threshold = magnitude.topk(count, dim=1).values[:, -1:]
-    return (magnitude >= threshold).view_as(target)
 
 
 def _psnr(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

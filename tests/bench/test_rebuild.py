@@ -114,3 +114,15 @@ def test_margins_of_a_folder_without_results_is_one_line(tmp_path, capsys):
     assert margins.main([str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and "results.csv" in err
+
+
+def test_a_rerun_keeps_the_figures_its_folder_holds_and_refreshes_those_it_draws_again(tmp_path):
+    """A dataset's contact sheets are committed and need the run's images: a rerun must not drop them."""
+    folder = _committed(tmp_path)
+    (folder / "figures").mkdir()
+    (folder / "figures" / "sheet_a.png").write_bytes(b"old a")
+    (folder / "figures" / "sheet_b.png").write_bytes(b"old b")
+    draws_a = WRITES_A_RUN + "; (out / 'figures').mkdir(); (out / 'figures' / 'sheet_a.png').write_bytes(b'new a')"
+    rb.rerun(_fake_entry(draws_a), tmp_path / "reports", "unused", tmp_path / "work")
+    assert (folder / "figures" / "sheet_a.png").read_bytes() == b"new a"
+    assert (folder / "figures" / "sheet_b.png").read_bytes() == b"old b"
