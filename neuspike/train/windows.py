@@ -50,7 +50,7 @@ from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.train.spec import KIND_WEIGHTS, SWEEP_GRIDS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
-from neuspike.train.terms import TERMS, Step, edge_mask  # noqa: F401  (edge_mask lives with the loss)
+from neuspike.train.terms import TERMS, Step
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]

@@ -487,7 +487,8 @@ def test_the_edge_ssim_term_scores_the_ssim_loss_on_the_truths_edges_only():
     import kornia
 
     from neuspike.methods import create
-    from neuspike.train.windows import WindowTask, edge_mask
+    from neuspike.train.terms import edge_mask
+    from neuspike.train.windows import WindowTask
     from bench.fast_motion import edge_mask as report_edges
 
     method = create("neuspike-net-spike", precision="float32")
