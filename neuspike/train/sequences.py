@@ -73,6 +73,7 @@ from neuspike.scenes.motion import backward_flow, image_speed_px_s, scene_time_s
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.train.spec import LIGHTS, MOTIONS, SequenceData, TrainSpec
+from neuspike.train.terms import SEQUENCE_TERMS, SequenceStep
 
 __all__ = [
     "Cell", "SequenceItem", "SequenceTask", "build_shard", "draw_cell", "load_shard", "make_batch", "partial_window",
@@ -458,28 +459,22 @@ def warp(image: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, torch.T
 
 def sequence_loss(outputs: Sequence[torch.Tensor], batch: dict[str, torch.Tensor], data: SequenceData
                   ) -> tuple[torch.Tensor, dict[str, float]]:
-    """Mean loss over the steps after ``data.warmup_windows`` (module docstring); also its parts as floats."""
-    import kornia
+    """The image terms of ``data.losses`` (those that score the outputs alone: l1, SSIM, temporal) over the
+    steps after ``data.warmup_windows``; also their parts as floats."""
+    return _sum([(SEQUENCE_TERMS[n], p) for n, p in data.losses.items() if SEQUENCE_TERMS[n].image_only],
+                SequenceStep(outputs=list(outputs), batch=batch, data=data, warp=warp))
 
-    targets, flow = batch["targets"], batch["flow"]
-    l1 = ssim = tc = 0.0
-    n = 0
-    for k in range(data.warmup_windows, len(outputs)):
-        o = outputs[k].float()
-        y = targets[k]
-        l1 = l1 + (o - y).abs().mean()
-        ssim = ssim + 2 * kornia.losses.ssim_loss(o, y, window_size=7, max_val=1.0)  # = 1 - SSIM
-        if k > 0 and data.temporal > 0:
-            prev_o, valid = warp(outputs[k - 1].float(), flow[k])
-            prev_y, _ = warp(targets[k - 1], flow[k])
-            mask = valid * torch.exp(-data.occlusion_alpha * (y - prev_y) ** 2)
-            tc = tc + (mask * (o - prev_o).abs()).mean()
-        n += 1
-    l1, ssim, tc = l1 / n, ssim / n, tc / n
-    total = data.l1 * l1 + data.ssim * ssim + data.temporal * tc
-    parts = {k: float(v.detach()) if torch.is_tensor(v) else float(v)
-             for k, v in (("l1", l1), ("ssim_loss", ssim), ("temporal", tc))}
-    return total, parts
+
+def _sum(terms, step) -> tuple[Any, dict[str, float]]:
+    """The terms' contributions added up in the registry's order, and what they log."""
+    loss: Any = 0.0
+    parts: dict[str, float] = {}
+    for term, params in terms:
+        value, logged = term.compute(step, **params)
+        if value is not None:
+            loss = loss + value
+        parts.update(logged)
+    return loss, parts
 
 
 def run_sequence(module: torch.nn.Module, voxels: torch.Tensor, *, precision: str) -> list[torch.Tensor]:
@@ -580,18 +575,9 @@ class SequenceTask:
                            length=self.data.length, partial_first=self.data.partial_first)
         batch = {k: v.to(self.device) for k, v in batch.items()}
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
-        loss, parts = sequence_loss(outputs, batch, self.data)
-        if self.data.history > 0:
-            start = self.data.length // 2
-            short = run_sequence(self.module, batch["voxels"][start:], precision=self.precision)
-            gap = (outputs[-1].float() - short[-1].float()).abs().mean()
-            loss = loss + self.data.history * gap
-        if self.data.empty > 0:
-            blank = torch.zeros((1, 1, *batch["voxels"].shape[2:]), device=self.device)
-            image = run_sequence(self.module, blank, precision=self.precision)[0].float()
-            spread = (image - image.mean()).abs().mean()
-            loss = loss + self.data.empty * spread
-            parts["empty_spread"] = float(spread.detach())
+        step_ctx = SequenceStep(outputs=outputs, batch=batch, data=self.data, task=self, warp=warp,
+                                run=lambda voxels: run_sequence(self.module, voxels, precision=self.precision))
+        loss, parts = _sum([(SEQUENCE_TERMS[n], p) for n, p in self.data.losses.items()], step_ctx)
         return loss, {**parts, "variant": "main"}
 
     def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:

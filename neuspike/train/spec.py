@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence, Union
 
 from neuspike.errors import InputError
-from neuspike.train.terms import DEFAULT_LOSSES, legacy_losses, resolve_losses
+from neuspike.train.terms import DEFAULT_LOSSES, DEFAULT_SEQUENCE_LOSSES, legacy_losses, resolve_losses
 from neuspike.utils.checks import check_int
 
 __all__ = [
@@ -332,12 +332,13 @@ class SequenceData:
     ``shard_root`` holds one folder per :meth:`key`; ``train_items`` / ``val_items`` are the items
     simulated, by ``workers`` processes (not part of the key or the run's identity: the items are the
     same whatever the count). Scoring: ``length`` consecutive windows per training sequence, the first
-    ``warmup_windows`` of them only carry the state; loss ``l1 * |o - y| + ssim * (1 - SSIM) +
-    temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha``, plus
-    ``history`` times the gap between the last image and the same image from a second pass over the
-    last ``length - length // 2`` windows started from a zero state (0: off;
-    :mod:`neuspike.train.sequences`), plus ``empty`` times the spatial spread of the image that one
-    window without events gives from a zero state (0: off). ``partial_first``: share of the training runs
+    ``warmup_windows`` of them only carry the state; the loss is the sum of the registered sequence terms
+    ``losses`` names (:data:`neuspike.train.terms.SEQUENCE_TERMS`; default ``l1 * |o - y| + ssim * (1 - SSIM) +
+    temporal * M * |o_k - warp(o_{k-1})|`` with the occlusion mask's ``occlusion_alpha`` 50; ``history``: the gap
+    between the last image and the same image from a second pass over the last ``length - length // 2`` windows
+    started from a zero state; ``empty``: the spatial spread of the image that one window without events gives
+    from a zero state). The earlier fields ``l1``, ``ssim``, ``temporal``, ``occlusion_alpha``, ``history`` and
+    ``empty`` are read into those terms. ``partial_first``: share of the training runs
     whose first window is cut short (:func:`neuspike.train.sequences.partial_window`; 0: none).
     ``sensor``: how each sequence's event camera is drawn beyond its threshold, a key of
     :data:`neuspike.train.sequences.SENSOR_DRAWS` (``"nominal"``: the noise level's stages only, as
@@ -368,14 +369,9 @@ class SequenceData:
     workers: int = 1
     length: int = 8
     warmup_windows: int = 2
-    l1: float = 1.0
-    ssim: float = 1.0
-    temporal: float = 1.0
-    occlusion_alpha: float = 50.0
-    history: float = 0.0
-    empty: float = 0.0
     partial_first: float = 0.0
     sensor: str = "nominal"
+    losses: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_SEQUENCE_LOSSES))
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -415,14 +411,11 @@ class SequenceData:
             raise InputError(f"length: expected 1..{self.windows} windows, got {self.length}")
         if not 0 <= self.warmup_windows < self.length:
             raise InputError(f"warmup_windows: expected 0..{self.length - 1}, got {self.warmup_windows}")
-        if not (isinstance(self.history, (int, float)) and math.isfinite(self.history) and self.history >= 0):
-            raise InputError(f"history: expected a weight >= 0, got {self.history!r}")
-        if not (isinstance(self.empty, (int, float)) and math.isfinite(self.empty) and self.empty >= 0):
-            raise InputError(f"empty: expected a weight >= 0, got {self.empty!r}")
+        put(self, "losses", resolve_losses(self.losses, "sequences"))
         if not (isinstance(self.partial_first, (int, float)) and 0.0 <= self.partial_first <= 1.0):
             raise InputError(f"partial_first: expected a share in [0, 1], got {self.partial_first!r}")
-        if self.history > 0 and self.length < 2:
-            raise InputError("history: the second pass needs sequences of at least 2 windows (length >= 2)")
+        if "history" in self.losses and self.length < 2:
+            raise InputError("losses.history: the second pass needs sequences of at least 2 windows (length >= 2)")
 
     def key(self, seed: int | None = None) -> str:
         """The shard folder's name: a hash of what an item is (not of the counts or scoring).
@@ -644,8 +637,8 @@ def _data_section(d: Mapping[str, Any], where: str) -> DataSection:
         raise InputError(f"{where}: data.kind must be one of {sorted(DATA_KINDS)}, got {kind!r}")
     if d.get("view") is not None and kind == "sequences":
         d["view"] = tuple(d["view"])
-    if kind == "windows":  # the earlier loss fields become their registered terms
-        d, d["losses"] = legacy_losses({k: v for k, v in d.items() if k != "losses"}, d.get("losses"))
+    # the earlier loss fields become their registered terms
+    d, d["losses"] = legacy_losses({k: v for k, v in d.items() if k != "losses"}, d.get("losses"), kind)
     return _strict(DATA_KINDS[kind], d, f"{where} (data)")
 
 

@@ -31,7 +31,8 @@ from typing import Any, Callable, Mapping
 
 from neuspike.errors import InputError
 
-__all__ = ["DEFAULT_LOSSES", "LEGACY_FIELDS", "LossTerm", "Step", "TERMS", "edge_mask", "gate_targets", "legacy_losses",
+__all__ = ["DEFAULT_LOSSES", "DEFAULT_SEQUENCE_LOSSES", "LEGACY_FIELDS", "LossTerm", "SEQUENCE_TERMS", "SequenceStep",
+           "Step", "TERMS", "edge_mask", "gate_targets", "legacy_losses",
            "register_term", "resolve_losses"]
 
 #: The noise levels a term may name (as :data:`neuspike.train.spec.NOISE_LEVELS`).
@@ -63,15 +64,21 @@ class LossTerm:
     doc: str = ""
 
 
-#: The registry, in the order the loss adds the terms up.
+#: The registry of single-window terms, in the order the loss adds them up.
 TERMS: dict[str, LossTerm] = {}
+#: The registry of sequence terms (recurrent networks), likewise.
+SEQUENCE_TERMS: dict[str, LossTerm] = {}
+#: Each data kind's registry.
+REGISTRIES: dict[str, dict[str, LossTerm]] = {"windows": TERMS, "sequences": SEQUENCE_TERMS}
 
 
-def register_term(term: LossTerm) -> LossTerm:
-    """Add ``term`` to :data:`TERMS` (a name registered twice is an error)."""
-    if term.name in TERMS:
+def register_term(term: LossTerm, kind: str = "windows") -> LossTerm:
+    """Add ``term`` to the registry of ``kind`` (``"windows"`` or ``"sequences"``; a name registered twice is an
+    error)."""
+    registry = REGISTRIES[kind]
+    if term.name in registry:
         raise InputError(f"loss term {term.name!r} is registered already")
-    TERMS[term.name] = term
+    registry[term.name] = term
     return term
 
 
@@ -101,7 +108,7 @@ def _weight(where: str, value: Any) -> float:
     return float(value)
 
 
-def resolve_losses(losses: Any) -> dict[str, dict[str, Any]]:
+def resolve_losses(losses: Any, kind: str = "windows") -> dict[str, dict[str, Any]]:
     """``losses`` checked and completed: ``{term: {"weight": w, **params}}`` in the registry's order,
     every parameter given (defaults filled in), terms of weight 0 with nothing else set left out.
 
@@ -113,11 +120,12 @@ def resolve_losses(losses: Any) -> dict[str, dict[str, Any]]:
     """
     if not isinstance(losses, Mapping):
         raise InputError(f"losses: expected {{term: weight or {{parameter: value}}}}, got {losses!r}")
-    unknown = sorted(set(losses) - set(TERMS))
+    registry = REGISTRIES[kind]
+    unknown = sorted(set(losses) - set(registry))
     if unknown:
-        raise InputError(f"losses: unknown terms {unknown}; the registered ones: {', '.join(TERMS)}")
+        raise InputError(f"losses: unknown terms {unknown}; the registered ones: {', '.join(registry)}")
     out: dict[str, dict[str, Any]] = {}
-    for name, term in TERMS.items():
+    for name, term in registry.items():
         if name not in losses:
             continue
         given = losses[name]
@@ -137,6 +145,15 @@ def resolve_losses(losses: Any) -> dict[str, dict[str, Any]]:
 #: The losses of a window spec that names none: L1 + the SSIM loss (window 11), as every spec before the registry.
 DEFAULT_LOSSES: dict[str, Any] = {"l1": 1.0, "ssim": {"weight": 1.0, "window": 11}}
 
+#: The losses of a sequence spec that names none, as every spec before the registry.
+DEFAULT_SEQUENCE_LOSSES: dict[str, Any] = {"l1": 1.0, "ssim": 1.0, "temporal": {"weight": 1.0, "occlusion_alpha": 50.0}}
+
+#: The earlier fields of a sequence spec and the (term, parameter) each became.
+SEQUENCE_LEGACY_FIELDS: dict[str, tuple[str, str]] = {
+    "l1": ("l1", "weight"), "ssim": ("ssim", "weight"), "temporal": ("temporal", "weight"),
+    "occlusion_alpha": ("temporal", "occlusion_alpha"), "history": ("history", "weight"), "empty": ("empty", "weight"),
+}
+
 #: The earlier spec fields and the (term, parameter) each became.
 LEGACY_FIELDS: dict[str, tuple[str, str]] = {
     "ssim_weight": ("ssim", "weight"), "ssim_window": ("ssim", "window"),
@@ -150,16 +167,20 @@ LEGACY_FIELDS: dict[str, tuple[str, str]] = {
 }
 
 
-def legacy_losses(section: Mapping[str, Any], losses: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+def legacy_losses(section: Mapping[str, Any], losses: Any = None, kind: str = "windows"
+                  ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Move the earlier fields of ``section`` into a ``losses`` mapping: ``(section without them, losses)``.
 
-    ``losses`` (the section's own, if any) starts from :data:`DEFAULT_LOSSES` where it is ``None``; an
-    earlier field sets its term's parameter (``None`` values, the earlier "not set", are skipped).
+    ``losses`` (the section's own, if any) starts from the kind's defaults (:data:`DEFAULT_LOSSES`,
+    :data:`DEFAULT_SEQUENCE_LOSSES`) where it is ``None``; an earlier field sets its term's parameter
+    (``None`` values, the earlier "not set", are skipped).
     """
     rest = dict(section)
+    defaults, fields = ((DEFAULT_LOSSES, LEGACY_FIELDS) if kind == "windows"
+                        else (DEFAULT_SEQUENCE_LOSSES, SEQUENCE_LEGACY_FIELDS))
     out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v)
-                           for k, v in (DEFAULT_LOSSES if losses is None else losses).items()}
-    for key, (term, param) in LEGACY_FIELDS.items():
+                           for k, v in (defaults if losses is None else losses).items()}
+    for key, (term, param) in fields.items():
         if key not in rest:
             continue
         value = rest.pop(key)
@@ -168,10 +189,8 @@ def legacy_losses(section: Mapping[str, Any], losses: Any = None) -> tuple[dict[
         current = out.get(term, {})
         current = {"weight": current} if not isinstance(current, Mapping) else dict(current)
         current[param] = value
-        if term == "ssim" and "weight" not in current:
-            current["weight"] = 1.0
-        if term in ("spike_floor", "gate_target", "distill", "offset", "support", "edge_ssim") and "weight" not in current:
-            current["weight"] = 0.0
+        if "weight" not in current:
+            current["weight"] = 1.0 if term in ("l1", "ssim", "temporal") else 0.0
         out[term] = current
     return rest, out
 
@@ -417,3 +436,100 @@ register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": N
                        check=_check_floor, setup=_floor_setup,
                        doc="fusion steps: relu(l_fusion - l_spike) per crop, l a crop's L1 + SSIM-term loss (terms "
                            "'both') or SSIM loss alone ('ssim'), weighted per crop by its noise level's weight"))
+
+
+# ----------------------------------------------------------------------------------------------
+# The sequence terms (recurrent networks: :mod:`neuspike.train.sequences`)
+# ----------------------------------------------------------------------------------------------
+
+@dataclass
+class SequenceStep:
+    """What a sequence term sees of one training step: ``outputs`` (the network's image after each window of
+    the batch, K of (B, 1, H, W)), ``batch`` (``voxels``, ``targets``, ``flow``), ``data`` (the spec's data
+    section) and ``task`` (the :class:`~neuspike.train.sequences.SequenceTask`; ``None`` where only the
+    images are scored)."""
+
+    outputs: list[Any]
+    batch: dict[str, Any]
+    data: Any
+    task: Any = None
+    #: ``warp(image, flow) -> (warped, valid)`` (:func:`neuspike.train.sequences.warp`).
+    warp: Callable[..., Any] | None = None
+    #: ``run(voxels) -> outputs``: the task's network over a sequence of voxel grids from a zero state.
+    run: Callable[[Any], list[Any]] | None = None
+
+
+def _scored(step: SequenceStep) -> range:
+    """The windows the loss scores: those after ``warmup_windows``."""
+    return range(step.data.warmup_windows, len(step.outputs))
+
+
+def _seq_l1(step: SequenceStep, *, weight: float) -> tuple[Any, dict[str, float]]:
+    targets, l1 = step.batch["targets"], 0.0
+    for k in _scored(step):
+        l1 = l1 + (step.outputs[k].float() - targets[k]).abs().mean()
+    l1 = l1 / len(_scored(step))
+    return weight * l1, {"l1": float(l1.detach()) if hasattr(l1, "detach") else float(l1)}
+
+
+def _seq_ssim(step: SequenceStep, *, weight: float) -> tuple[Any, dict[str, float]]:
+    import kornia
+
+    targets, ssim = step.batch["targets"], 0.0
+    for k in _scored(step):
+        ssim = ssim + 2 * kornia.losses.ssim_loss(step.outputs[k].float(), targets[k], window_size=7, max_val=1.0)
+    ssim = ssim / len(_scored(step))
+    return weight * ssim, {"ssim_loss": float(ssim.detach()) if hasattr(ssim, "detach") else float(ssim)}
+
+
+def _seq_temporal(step: SequenceStep, *, weight: float, occlusion_alpha: float) -> tuple[Any, dict[str, float]]:
+    import torch
+
+    warp = step.warp
+    targets, flow, tc = step.batch["targets"], step.batch["flow"], 0.0
+    for k in _scored(step):
+        if k > 0:
+            o, y = step.outputs[k].float(), targets[k]
+            prev_o, valid = warp(step.outputs[k - 1].float(), flow[k])
+            prev_y, _ = warp(targets[k - 1], flow[k])
+            mask = valid * torch.exp(-occlusion_alpha * (y - prev_y) ** 2)
+            tc = tc + (mask * (o - prev_o).abs()).mean()
+    tc = tc / len(_scored(step))
+    return weight * tc, {"temporal": float(tc.detach()) if hasattr(tc, "detach") else float(tc)}
+
+
+def _check_alpha(params: dict[str, Any]) -> dict[str, Any]:
+    _weight("losses.temporal.occlusion_alpha", params["occlusion_alpha"])
+    return {**params, "occlusion_alpha": float(params["occlusion_alpha"])}
+
+
+def _history(step: SequenceStep, *, weight: float) -> tuple[Any, dict[str, float]]:
+    start = step.data.length // 2
+    short = step.run(step.batch["voxels"][start:])
+    gap = (step.outputs[-1].float() - short[-1].float()).abs().mean()
+    return weight * gap, {}
+
+
+def _empty(step: SequenceStep, *, weight: float) -> tuple[Any, dict[str, float]]:
+    import torch
+
+    blank = torch.zeros((1, 1, *step.batch["voxels"].shape[2:]), device=step.batch["voxels"].device)
+    image = step.run(blank)[0].float()
+    spread = (image - image.mean()).abs().mean()
+    return weight * spread, {"empty_spread": float(spread.detach())}
+
+
+register_term(LossTerm("l1", _seq_l1, image_only=True, doc="mean absolute error over the scored windows"),
+              "sequences")
+register_term(LossTerm("ssim", _seq_ssim, image_only=True, doc="1 - SSIM (window 7) over the scored windows"),
+              "sequences")
+register_term(LossTerm("temporal", _seq_temporal, defaults={"occlusion_alpha": 50.0}, image_only=True,
+                       check=_check_alpha,
+                       doc="|o_k - warp(o_{k-1})| under the exact flow, masked where the truth changes (occlusions)"),
+              "sequences")
+register_term(LossTerm("history", _history, weight=0.0,
+                       doc="the gap between the last image and the same image from a second pass over the last "
+                           "length - length // 2 windows started from a zero state"), "sequences")
+register_term(LossTerm("empty", _empty, weight=0.0,
+                       doc="the spatial spread of the image one window without events gives from a zero state"),
+              "sequences")

@@ -151,7 +151,8 @@ def _old_sequence_folder(spec: TrainSpec) -> None:
     seq = {"method": spec.method, "data": data, "seed": spec.seed, "train_items": d.train_items,
            "val_items": d.val_items, "crop": spec.crop, "batch": spec.batch, "length": d.length,
            "warmup": d.warmup_windows, "lr": spec.lr, "lr_warmup_steps": spec.warmup, "lr_min": spec.lr_min,
-           "l1": d.l1, "ssim": d.ssim, "temporal": d.temporal, "occlusion_alpha": d.occlusion_alpha,
+           "l1": d.losses["l1"]["weight"], "ssim": d.losses["ssim"]["weight"],
+           "temporal": d.losses["temporal"]["weight"], "occlusion_alpha": d.losses["temporal"]["occlusion_alpha"],
            "steps": spec.steps, "val_every": spec.val_every, "checkpoint_every": spec.checkpoint_every,
            "precision": spec.precision, "init_from": spec.init_from}
     (out / "spec.json").write_text(json.dumps(seq))

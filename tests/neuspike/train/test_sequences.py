@@ -23,6 +23,7 @@ from neuspike.train.spec import SequenceData, TrainSpec, learning_rate
 from neuspike.utils.rng import derive_rng
 
 DataSpec = SequenceData
+DEFAULT_SEQUENCE_LOSSES = dict(SequenceData().losses)
 
 
 def training_method(name: str):
@@ -448,7 +449,7 @@ def test_history_term_adds_the_gap_between_a_full_and_a_restarted_pass(tiny):
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
     losses = {}
     for w in (0.0, 2.0):
-        data = DataSpec(size=40, windows=4, length=4, warmup_windows=1, history=w)
+        data = DataSpec(size=40, windows=4, length=4, warmup_windows=1, losses={**DEFAULT_SEQUENCE_LOSSES, "history": w})
         spec = TrainSpec(method="firenet-sim", data=data, out_dir="unused", crop=24, batch=1, steps=1,
                          precision="float32", threads=None)
         task = SequenceTask(spec, trained)
@@ -463,7 +464,7 @@ def test_history_term_adds_the_gap_between_a_full_and_a_restarted_pass(tiny):
     assert gap > 1e-4  # a fresh FireNet's image depends on its history
     assert losses[2.0] - losses[0.0] == pytest.approx(2.0 * gap, rel=1e-4, abs=1e-6)
     with pytest.raises(InputError, match="history"):
-        DataSpec(history=-1.0)
+        DataSpec(losses={"history": -1.0})
 
 
 def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
@@ -478,7 +479,7 @@ def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
     shard = {"voxels": item.voxels[None], "targets": item.targets[None, :, None], "flow": item.flow[None]}
 
     def task_for(w, net):
-        data = DataSpec(size=40, windows=4, length=4, warmup_windows=1, empty=w)
+        data = DataSpec(size=40, windows=4, length=4, warmup_windows=1, losses={**DEFAULT_SEQUENCE_LOSSES, "empty": w})
         spec = TrainSpec(method="firenet-sim", data=data, out_dir="unused", crop=24, batch=1, steps=1,
                          precision="float32", threads=None)
         task = SequenceTask(spec, net)
@@ -509,7 +510,7 @@ def test_empty_term_adds_the_spread_of_the_image_without_events(tiny):
 
     assert spread_after_steps(1000.0) < 0.5 * spread_after_steps(0.0)
     with pytest.raises(InputError, match="empty"):
-        DataSpec(empty=-1.0)
+        DataSpec(losses={"empty": -1.0})
 
 
 def test_partial_window_spreads_its_last_bins_over_the_window():

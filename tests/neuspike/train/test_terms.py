@@ -86,3 +86,21 @@ def test_a_new_experiment_is_one_registered_term(clean_registry):
     image, target = torch.full((1, 1, 16, 16), 0.6), torch.full((1, 1, 16, 16), 0.5)
     loss, parts = task.loss(image, target)
     assert float(loss) == pytest.approx(0.1 + 0.25 * 2.0 * 0.6) and parts["brightness"] == pytest.approx(1.2)
+
+
+def test_sequence_specs_name_their_own_terms_and_read_the_earlier_fields():
+    from neuspike.train.spec import SequenceData
+
+    assert SequenceData().losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0},
+                                     "temporal": {"weight": 1.0, "occlusion_alpha": 50.0}}
+    with pytest.raises(InputError, match=r"unknown terms \['offset'\]; the registered ones: l1, ssim, temporal, "
+                                         r"history, empty"):
+        SequenceData(losses={"offset": 1})
+    with pytest.raises(InputError, match="at least 2 windows"):
+        SequenceData(length=1, warmup_windows=0, losses={"history": 1})
+    earlier = TrainSpec(method="e2vid", data=SequenceData()).as_dict()
+    earlier["data"].pop("losses")
+    earlier["data"].update(l1=1.0, ssim=1.0, temporal=0.5, occlusion_alpha=20.0, history=0.3, empty=0.0)
+    assert spec_from_dict(earlier).data.losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0},
+                                                   "temporal": {"weight": 0.5, "occlusion_alpha": 20.0},
+                                                   "history": {"weight": 0.3}}
