@@ -73,7 +73,7 @@ from neuspike.scenes.motion import backward_flow, image_speed_px_s, scene_time_s
 from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.train.spec import LIGHTS, MOTIONS, SequenceData, TrainSpec
-from neuspike.train.terms import SEQUENCE_TERMS, SequenceStep
+from neuspike.train.terms import SEQUENCE_TERMS, SequenceStep, sum_terms
 
 __all__ = [
     "Cell", "SequenceItem", "SequenceTask", "build_shard", "draw_cell", "load_shard", "make_batch", "partial_window",
@@ -461,20 +461,8 @@ def sequence_loss(outputs: Sequence[torch.Tensor], batch: dict[str, torch.Tensor
                   ) -> tuple[torch.Tensor, dict[str, float]]:
     """The image terms of ``data.losses`` (those that score the outputs alone: l1, SSIM, temporal) over the
     steps after ``data.warmup_windows``; also their parts as floats."""
-    return _sum([(SEQUENCE_TERMS[n], p) for n, p in data.losses.items() if SEQUENCE_TERMS[n].image_only],
+    return sum_terms([(SEQUENCE_TERMS[n], p) for n, p in data.losses.items() if SEQUENCE_TERMS[n].image_only],
                 SequenceStep(outputs=list(outputs), batch=batch, data=data, warp=warp))
-
-
-def _sum(terms, step) -> tuple[Any, dict[str, float]]:
-    """The terms' contributions added up in the registry's order, and what they log."""
-    loss: Any = 0.0
-    parts: dict[str, float] = {}
-    for term, params in terms:
-        value, logged = term.compute(step, **params)
-        if value is not None:
-            loss = loss + value
-        parts.update(logged)
-    return loss, parts
 
 
 def run_sequence(module: torch.nn.Module, voxels: torch.Tensor, *, precision: str) -> list[torch.Tensor]:
@@ -577,7 +565,7 @@ class SequenceTask:
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
         step_ctx = SequenceStep(outputs=outputs, batch=batch, data=self.data, task=self, warp=warp,
                                 run=lambda voxels: run_sequence(self.module, voxels, precision=self.precision))
-        loss, parts = _sum([(SEQUENCE_TERMS[n], p) for n, p in self.data.losses.items()], step_ctx)
+        loss, parts = sum_terms([(SEQUENCE_TERMS[n], p) for n, p in self.data.losses.items()], step_ctx)
         return loss, {**parts, "variant": "main"}
 
     def validate(self, variant: str, autocast: Callable[[], Any]) -> dict[str, float]:

@@ -33,7 +33,7 @@ from neuspike.errors import InputError
 
 __all__ = ["DEFAULT_LOSSES", "DEFAULT_SEQUENCE_LOSSES", "LEGACY_FIELDS", "LossTerm", "SEQUENCE_TERMS", "SequenceStep",
            "Step", "TERMS", "edge_mask", "gate_targets", "legacy_losses",
-           "register_term", "resolve_losses"]
+           "register_term", "resolve_losses", "sum_terms"]
 
 #: The noise levels a term may name (as :data:`neuspike.train.spec.NOISE_LEVELS`).
 _NOISE_LEVELS = ("none", "small", "medium", "high")
@@ -96,6 +96,19 @@ class Step:
     convex: Any = None
     #: What a ``before_forward`` hook captured, by term name.
     captured: dict[str, Any] = field(default_factory=dict)
+
+
+def sum_terms(terms: Any, step: Any) -> tuple[Any, dict[str, float]]:
+    """``terms`` (``(term, parameters)`` pairs, in the registry's order) computed on ``step`` and added up:
+    ``(loss, what they log)``; a term that does not apply to the step adds nothing."""
+    loss: Any = 0.0
+    parts: dict[str, float] = {}
+    for term, params in terms:
+        value, logged = term.compute(step, **params)
+        if value is not None:
+            loss = loss + value
+        parts.update(logged)
+    return loss, parts
 
 
 # ----------------------------------------------------------------------------------------------

@@ -50,7 +50,7 @@ from neuspike.simulation.cell import simulate_sample
 from neuspike.simulation.recording import SensorConfig
 from neuspike.streams import EventStream, SpikeStream
 from neuspike.train.spec import KIND_WEIGHTS, SWEEP_GRIDS, SWEEP_SPEED_PX_S, TrainSpec, WindowData, spec_from_dict
-from neuspike.train.terms import TERMS, Step
+from neuspike.train.terms import TERMS, Step, sum_terms
 
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
@@ -529,19 +529,7 @@ class WindowTask:
         step = Step(task=self, index=-1, variant="single", inputs=[], target=target, autocast=contextlib.nullcontext)
         step.image, step.convex = (pred if isinstance(pred, tuple) else (pred, None))
         step.image = step.image.float()
-        return self._sum([(t, p) for t, p in self.terms if t.image_only], step)
-
-    @staticmethod
-    def _sum(terms: Sequence[tuple[Any, dict[str, Any]]], step: Step) -> tuple[Any, dict[str, float]]:
-        """The terms' contributions added up in the registry's order, and what they log."""
-        loss: Any = 0.0
-        parts: dict[str, float] = {}
-        for term, params in terms:
-            value, logged = term.compute(step, **params)
-            if value is not None:
-                loss = loss + value
-            parts.update(logged)
-        return loss, parts
+        return sum_terms([(t, p) for t, p in self.terms if t.image_only], step)
 
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
         """The loss of step ``step`` (its batch, variant and forward pass) and what the log records."""
@@ -563,7 +551,7 @@ class WindowTask:
                 u()
         image, ctx.convex = pred if isinstance(pred, tuple) else (pred, None)
         ctx.image = image.float()
-        loss, parts = self._sum(self.terms, ctx)
+        loss, parts = sum_terms(self.terms, ctx)
         return loss, {**parts, "variant": variant, "samples_per_s": round(self.spec.batch / max(t_data, 1e-9), 1)}
 
     @torch.no_grad()
