@@ -161,10 +161,19 @@ def randomised_sensor(rng: np.random.Generator, noise: str) -> tuple[Effect, ...
     return tuple(drawn)
 
 
+def mixed_sensor(rng: np.random.Generator, noise: str) -> tuple[Effect, ...]:
+    """Half the sequences the nominal event camera, half one drawn as :func:`randomised_sensor` draws it:
+    a network that meets real pixels keeps the simulator's own camera too. The randomised stages are
+    drawn always, so the same seed draws the same pixels whichever half a sequence falls in."""
+    nominal = rng.random() < 0.5
+    drawn = randomised_sensor(rng, noise)
+    return () if nominal else drawn
+
+
 #: How a sequence's event camera is drawn (``SequenceData.sensor``): name -> ``draw(rng, noise level)``
 #: returning the declared event stages. A new way to draw sensors is one entry here.
 SENSOR_DRAWS: dict[str, Callable[[np.random.Generator, str], tuple[Effect, ...]]] = {
-    "nominal": nominal_sensor, "randomised": randomised_sensor,
+    "nominal": nominal_sensor, "randomised": randomised_sensor, "mixed": mixed_sensor,
 }
 
 

@@ -343,7 +343,8 @@ class SequenceData:
     ``sensor``: how each sequence's event camera is drawn beyond its threshold, a key of
     :data:`neuspike.train.sequences.SENSOR_DRAWS` (``"nominal"``: the noise level's stages only, as
     every spec before the field; ``"randomised"``: per-pixel mismatch, refractory period, leak, shot
-    noise and bandwidth drawn per sequence, as real DAVIS pixels differ).
+    noise and bandwidth drawn per sequence, as real DAVIS pixels differ; ``"mixed"``: each sequence
+    one or the other, with probability 1/2).
     """
 
     kind: ClassVar[str] = "sequences"
@@ -442,7 +443,7 @@ class SequenceData:
 
 
 #: The names of :data:`neuspike.train.sequences.SENSOR_DRAWS` (kept here so a spec validates without torch).
-SENSOR_DRAW_NAMES = ("nominal", "randomised")
+SENSOR_DRAW_NAMES = ("nominal", "randomised", "mixed")
 
 DataSection = Union[WindowData, SequenceData]
 DATA_KINDS: dict[str, type] = {"windows": WindowData, "sequences": SequenceData}

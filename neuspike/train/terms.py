@@ -266,16 +266,38 @@ def _l1(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
     return weight * l1, {"l1": l1.item()}
 
 
-def _ssim(step: Step, *, weight: float, window: int) -> tuple[Any, dict[str, float]]:
-    ssim = step.task.ssim_loss(step.image, step.target)
-    return weight * ssim, {"ssim_loss": ssim.item()}
+def _ssim(step: Step, *, weight: float, window: int, noise_weights: Any = None) -> tuple[Any, dict[str, float]]:
+    if noise_weights is None:
+        ssim = step.task.ssim_loss(step.image, step.target)
+        return weight * ssim, {"ssim_loss": ssim.item()}
+    import torch
+
+    task = step.task
+    per_crop = task.crop_losses(step.image, step.target, "ssim")
+    w = torch.tensor([noise_weights.get(level, weight) for level in task.noise_levels(step.index)],
+                     dtype=per_crop.dtype, device=per_crop.device)
+    return (w * per_crop).mean(), {"ssim_loss": per_crop.mean().item()}
 
 
 def _check_window(params: dict[str, Any]) -> dict[str, Any]:
     window = params["window"]
     if isinstance(window, bool) or not isinstance(window, int) or window < 3 or window % 2 == 0:
         raise InputError(f"losses.ssim.window: expected an odd whole number >= 3, got {window!r}")
-    return params
+    return _check_noise_weights("losses.ssim", params)
+
+
+def _check_noise_weights(where: str, params: dict[str, Any]) -> dict[str, Any]:
+    """``params["noise_weights"]`` (None, or {noise level: weight >= 0}) checked; levels in order."""
+    w = params["noise_weights"]
+    if w is None:
+        return params
+    if not isinstance(w, Mapping) or not w:
+        raise InputError(f"{where}.noise_weights: expected {{noise level: weight}} with at least one level, got {w!r}")
+    bad = sorted(set(w) - set(_NOISE_LEVELS))
+    if bad:
+        raise InputError(f"{where}.noise_weights: unknown noise levels {bad}; choose from {', '.join(_NOISE_LEVELS)}")
+    return {**params, "noise_weights": {k: _weight(f"{where}.noise_weights[{k!r}]", w[k])
+                                        for k in _NOISE_LEVELS if k in w}}
 
 
 def _offset(step: Step, *, weight: float) -> tuple[Any, dict[str, float]]:
@@ -385,18 +407,7 @@ def _distill(step: Step, *, weight: float, teacher: str) -> tuple[Any, dict[str,
 def _check_floor(params: dict[str, Any]) -> dict[str, Any]:
     if params["terms"] not in ("both", "ssim"):
         raise InputError(f"losses.spike_floor.terms: expected both or ssim, got {params['terms']!r}")
-    w = params["noise_weights"]
-    if w is not None:
-        if not isinstance(w, Mapping) or not w:
-            raise InputError("losses.spike_floor.noise_weights: expected {noise level: weight} with at least one "
-                             f"level, got {w!r}")
-        bad = sorted(set(w) - set(_NOISE_LEVELS))
-        if bad:
-            raise InputError(f"losses.spike_floor.noise_weights: unknown noise levels {bad}; choose from "
-                             f"{', '.join(_NOISE_LEVELS)}")
-        params = {**params, "noise_weights": {k: _weight(f"losses.spike_floor.noise_weights[{k!r}]", w[k])
-                                              for k in _NOISE_LEVELS if k in w}}
-    return params
+    return _check_noise_weights("losses.spike_floor", params)
 
 
 def _floor_setup(task: Any, params: dict[str, Any]) -> None:
@@ -428,8 +439,10 @@ def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str) -
 
 
 register_term(LossTerm("l1", _l1, image_only=True, doc="mean absolute error of the image"))
-register_term(LossTerm("ssim", _ssim, image_only=True, defaults={"window": 11}, check=_check_window,
-                       doc="kornia's SSIM loss (1 - SSIM) / 2 over windows of the given side, data range 1"))
+register_term(LossTerm("ssim", _ssim, image_only=True, defaults={"window": 11, "noise_weights": None},
+                       check=_check_window,
+                       doc="kornia's SSIM loss (1 - SSIM) / 2 over windows of the given side, data range 1; with "
+                           "noise_weights each crop's loss weighted by its noise level's weight (others: weight)"))
 register_term(LossTerm("offset", _offset, image_only=True, weight=0.0,
                        doc="|mean(image) - mean(truth)| per crop, averaged: an error of the whole image's level, to "
                            "which the SSIM term is blind"))

@@ -607,3 +607,17 @@ def test_a_randomised_sensor_draws_the_event_camera_per_sequence_and_leaves_nomi
     assert min(thresholds) >= 0.2 and max(thresholds) <= 1.5 and max(thresholds) > 1.0
     with pytest.raises(InputError, match="sensor"):
         DataSpec(sensor="wild")
+
+
+def test_a_mixed_sensor_is_nominal_for_half_the_sequences_and_randomised_for_the_rest():
+    """``sensor="mixed"``: about half the sequences declare no stage; the others carry a threshold
+    mismatch (which every randomised camera has), with the randomised ranges; the same seed, the same cells."""
+    mixed = DataSpec(size=32, sensor="mixed", threshold_range=(0.1, 1.5))
+    rng = np.random.default_rng(9)
+    cells = [draw_cell(mixed, rng) for _ in range(400)]
+    assert draw_cell(mixed, np.random.default_rng(9)) == cells[0]
+    plain = [c for c in cells if c.condition.effects == ()]
+    assert 0.4 < len(plain) / len(cells) < 0.6
+    drawn = [{e.name: dict(e.params) for e in c.condition.effects} for c in cells if c.condition.effects]
+    assert all(0.01 <= n["threshold_mismatch"]["sigma"] <= 0.1 for n in drawn)
+    assert mixed.key() != DataSpec(size=32, sensor="randomised", threshold_range=(0.1, 1.5)).key()

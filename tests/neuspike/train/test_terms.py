@@ -15,14 +15,14 @@ from neuspike.train.terms import TERMS, LossTerm, register_term, resolve_losses
 
 
 def test_a_spec_names_its_terms_with_their_parameters_and_defaults():
-    assert WindowData().losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11}}
+    assert WindowData().losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None}}
     got = resolve_losses({"spike_floor": 2, "l1": 1, "offset": {"weight": 0.5}})
     assert list(got) == ["l1", "offset", "spike_floor"]  # the registry's order, whatever the spec's
     assert got["spike_floor"] == {"weight": 2.0, "noise_weights": None, "terms": "both"}
     assert resolve_losses({"offset": 0}) == {}  # weight 0 with its defaults: as if not named
     with pytest.raises(InputError, match=r"unknown terms \['wobble'\]; the registered ones: l1, ssim"):
         resolve_losses({"wobble": 1})
-    with pytest.raises(InputError, match=r"losses.ssim: unknown parameters \['size'\]; it takes weight, window"):
+    with pytest.raises(InputError, match=r"losses.ssim: unknown parameters \['size'\]; it takes weight, window, noise_weights"):
         resolve_losses({"ssim": {"size": 7}})
     with pytest.raises(InputError, match="losses.ssim.window"):
         resolve_losses({"ssim": {"window": 4}})
@@ -32,7 +32,7 @@ def test_set_reaches_a_term_and_its_parameters():
     spec = apply_settings(TrainSpec(), ["data.losses.offset=0.5", "data.losses.ssim.window=7",
                                         'data.losses.spike_floor={"weight": 2, "noise_weights": {"high": 16}}'])
     assert spec.data.losses["offset"] == {"weight": 0.5}
-    assert spec.data.losses["ssim"] == {"weight": 1.0, "window": 7}
+    assert spec.data.losses["ssim"] == {"weight": 1.0, "window": 7, "noise_weights": None}
     assert spec.data.losses["spike_floor"] == {"weight": 2.0, "noise_weights": {"high": 16.0}, "terms": "both"}
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
 
@@ -45,7 +45,7 @@ def test_the_earlier_fields_read_into_the_terms_and_every_shipped_spec_loads():
                            gate_targets=None, gate_target_weight=0.0, gate_forcing=False)
     earlier.update(teacher="neuspike/trained/neuspike-net.safetensors", distill_weight=1.0)
     losses = spec_from_dict(earlier).data.losses
-    assert losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11},
+    assert losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None},
                       "distill": {"weight": 1.0, "teacher": "neuspike/trained/neuspike-net.safetensors"},
                       "spike_floor": {"weight": 2.0, "noise_weights": {"medium": 8.0, "high": 16.0}, "terms": "both"}}
     cards = sorted(PACKAGE_WEIGHTS.glob("*.json"))

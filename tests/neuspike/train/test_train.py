@@ -621,6 +621,34 @@ def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tm
     assert seen == positive == {"none", "high"}  # both weights were used, on crops with an excess
 
 
+def test_the_ssim_term_by_noise_level_weighs_each_crop_by_its_windows_level(tmp_path, one_torch_thread):
+    """losses.ssim.noise_weights: the term is mean_i(w_i * s_i), s_i a crop's SSIM loss (1 - SSIM) / 2 from
+    kornia's SSIM map and w_i its noise level's weight (the others: the term's weight); without it the term
+    is as before. Bad levels are refused by name."""
+    import kornia
+
+    with pytest.raises(InputError, match="losses.ssim.noise_weights"):
+        window_data(losses={"l1": 1, "ssim": {"noise_weights": {"loud": 2.0}}})
+    common = dict(batch=4, train_items=6, noise_levels=("none", "high"))
+    spec = tiny_spec(tmp_path, losses={"ssim": {"weight": 0.5, "noise_weights": {"high": 3.0}}}, **common)
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task = trainer.task
+    seen = set()
+    for step in range(6):
+        levels = task.noise_levels(step)
+        seen.update(levels)
+        with torch.no_grad():
+            loss, parts = task.step_loss(step, trainer.autocast)
+            inputs, target = task.batch(step)
+            image = task.forward(inputs, task.step_variant(step)).float()
+            s = ((1 - kornia.metrics.ssim(image, target, window_size=11, max_val=1.0)) / 2).mean(dim=(1, 2, 3))
+        w = torch.tensor([3.0 if level == "high" else 0.5 for level in levels])
+        assert float(loss) == pytest.approx(float((w * s).mean()), rel=1e-5)
+        assert parts["ssim_loss"] == pytest.approx(float(s.mean()), rel=1e-5)
+    assert seen == {"none", "high"}
+
+
 def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_path, one_torch_thread):
     """spike_floor_terms='ssim': the floor is w * mean_i(relu(s_fusion,i - s_spike,i)), s a crop's SSIM loss
     (1 - SSIM) / 2 alone, computed here straight from kornia's SSIM map; the L1 part of the loss is left out
