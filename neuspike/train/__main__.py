@@ -20,13 +20,12 @@ from neuspike.methods.precision import PRECISIONS
 
 #: Flags that apply to one data kind only (a flag given for the other kind is refused).
 WINDOW_ONLY = ("val_windows", "spike_only_fraction", "speed_range", "val_view", "scale_range", "crop_trim",
-               "train_parts", "sweep_fraction", "sweep_scenes", "sweep_scene_weights", "broad_fraction")
+               "train_parts")
 SEQUENCE_ONLY = ("size", "view", "length", "kinds", "hdr_fraction", "view_fraction")
 #: Flags that make a spec (refused beside --spec, which runs its file as written).
 SPEC_FLAGS = ("shard", "steps", "batch", "crop", "lr", "lr_min", "warmup", "val_every", "seed", "threads", "precision",
               "init_from", "windows", "train_items", "val_items", "val_windows", "noise_levels", "speed_range",
-              "scale_range", "spike_only_fraction", "workers", "val_view", "crop_trim", "train_parts", "sweep_fraction",
-              "sweep_scenes", "sweep_scene_weights", "broad_fraction", "size", "view", "length", "kinds",
+              "scale_range", "spike_only_fraction", "workers", "val_view", "crop_trim", "train_parts", "size", "view", "length", "kinds",
               "hdr_fraction", "view_fraction", "export_dir")
 #: Of those, the ones that apply beside --spec: where the run writes and on what it runs, not what it trains.
 SPEC_OVERRIDES = ("shard", "workers", "threads", "export_dir")
@@ -59,15 +58,20 @@ Running the same command again resumes from the checkpoint (a different spec is 
 The loss of single windows is a sum of registered terms, each with its parameters (the data section's
 "losses"; by default l1 and ssim): offset, support, edge_ssim, gate_target, distill and spike_floor
 are set with --set data.losses.TERM=WEIGHT or --set 'data.losses.TERM={...}' (neuspike/train/terms.py
-lists each term's parameters)."""
+lists each term's parameters). The data's draw takes registered data terms likewise (the data
+section's "mixture"; by default none): for single windows sweep (a share of the windows at the
+sweeps' points, optionally with the sweeps' own scenes) and broad (a share of broad-leaves pictures),
+for sequences partial_first (a share of runs whose first window is cut short), set with
+--set data.mixture.TERM=FRACTION or --set 'data.mixture.TERM={...}' (neuspike/train/mixture.py)."""
 
 EPILOG = """\
 examples (the spec behind each shipped network is in its JSON card; its model card says how to run it):
   python -m neuspike.train neuspike-net --steps 1600 --batch 8 --crop 64 --windows 2000 \\
       --val-windows 32 --val-every 200 --lr 1e-3 --warmup 100 --threads 1 --export
   python -m neuspike.train neuspike-net --spec spec.json --out runs/nsn-again   # a spec file, as written
-  python -m neuspike.train neuspike-net --set data.losses.offset=0.5 \
+  python -m neuspike.train neuspike-net --set data.losses.offset=0.5 \\
       --set 'data.losses.distill={"weight": 1, "teacher": "neuspike/trained/neuspike-net.safetensors"}'
+  python -m neuspike.train neuspike-net --set 'data.mixture.sweep={"fraction": 0.5, "grid": "light-noise"}'
   python -m neuspike.train firenet-sim --train-items 166 --threads 1 --max-minutes 25
   python -m neuspike.train e2vid --device cuda            # on a GPU (--device cpu resumes it on a CPU)
   python -m neuspike.train e2vid --quick                  # a one-minute smoke run (its weights stay in runs/)"""
@@ -145,18 +149,6 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--train-parts", choices=("all", "motion"),
                    help="single windows, fusion networks with --init-from: 'motion' trains the motion path only and "
                         "holds the rest (so the spike-only variant stays as given; default all)")
-    d.add_argument("--sweep-fraction", type=float, metavar="P",
-                   help="single windows: draw a fraction P of the windows at the full sweeps' 12 points of light, "
-                        "motion scale and noise, panning at the sweeps' 1000 px/s (default 0)")
-    d.add_argument("--sweep-scenes", action="store_const", const=True, default=None,
-                   help="single windows, with --sweep-fraction: the sweep cells also take the sweeps' scenes (pan, "
-                        "zoom, fan, still alike, with the sweeps' zoom rate and fan)")
-    d.add_argument("--broad-fraction", type=float, metavar="P",
-                   help="single windows: a fraction P of the picture cells (pan, zoom, fan, still) take a broad-leaves "
-                        "picture (wide, mildly shaded regions) in place of a training photograph's region (default 0)")
-    d.add_argument("--sweep-scene-weights", metavar="PAN,ZOOM,FAN,STILL",
-                   help="single windows, with --sweep-scenes: relative shares of the four sweep scenes "
-                        "(e.g. 1,1,4,1; default equal)")
     d.add_argument("--size", type=int, help="sequences: simulated item size (pixels, square; default 128)")
     d.add_argument("--view", metavar="WxH",
                    help="sequences: fit the photographs to a WxH view and cut each item from it (e.g. 400x250, "
@@ -273,16 +265,13 @@ def _spec_of_flags(args: argparse.Namespace):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     for name in ("train_items", "val_items", "spike_only_fraction", "workers", "size", "length", "hdr_fraction",
-                 "view_fraction", "crop_trim", "train_parts", "sweep_fraction", "sweep_scenes", "broad_fraction"):
+                 "view_fraction", "crop_trim", "train_parts"):
         if getattr(args, name) is not None:
             kw[name] = getattr(args, name)
     if args.val_windows is not None:
         kw["val_items"] = args.val_windows
     if args.windows is not None:
         kw["train_items" if kind == "windows" else "windows"] = args.windows
-    if args.sweep_scene_weights is not None:
-        kw["sweep_scene_weights"] = _numbers(args.sweep_scene_weights, "--sweep-scene-weights",
-                                             "PAN,ZOOM,FAN,STILL", 4)
     for name, unit in (("speed_range", " in px/s"), ("scale_range", "")):
         if getattr(args, name) is not None:
             kw[name] = _pair(getattr(args, name), f"--{name.replace('_', '-')}", unit)

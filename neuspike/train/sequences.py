@@ -42,11 +42,11 @@ zero padding leave. The term says nothing about the image's level. It costs one 
 broader than SSIM's window, and the scores of such scenes follow the blank image's level;
 ``61a150f8:reports/e2vid/candidates/README.md``, stage 26.)
 
-Partial first windows (``partial_first`` > 0, default 0): every item's windows hold their full count,
-but a scene that gives few events, evaluated with the methods' bounded history, hands the network a
-single window cut short, from a zero state. That share of the training runs have their first window
-cut to the events of its last 1-4 of 5 bins, spread over the five (:func:`partial_window`); the target
-is unchanged (the scene at the window's end).
+Partial first windows (the ``partial_first`` data term, :mod:`neuspike.train.mixture`; default none):
+every item's windows hold their full count, but a scene that gives few events, evaluated with the
+methods' bounded history, hands the network a single window cut short, from a zero state. That share
+of the training runs have their first window cut to the events of its last 1-4 of 5 bins, spread over
+the five (:func:`partial_window`); the target is unchanged (the scene at the window's end).
 """
 
 from __future__ import annotations
@@ -569,7 +569,8 @@ class SequenceTask:
     def step_loss(self, step: int, autocast: Callable[[], Any]) -> tuple[torch.Tensor, dict[str, Any]]:
         spec = self.spec
         batch = make_batch(self.train_shard, derive_rng(spec.seed, "batch", step), batch=spec.batch, crop=spec.crop,
-                           length=self.data.length, partial_first=self.data.partial_first)
+                           length=self.data.length,
+                           partial_first=self.data.mixture.get("partial_first", {}).get("fraction", 0.0))
         batch = {k: v.to(self.device) for k, v in batch.items()}
         outputs = run_sequence(self.module, batch["voxels"], precision=self.precision)
         step_ctx = SequenceStep(outputs=outputs, batch=batch, data=self.data, task=self, warp=warp,

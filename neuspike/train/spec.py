@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence, Union
 
 from neuspike.errors import InputError
+from neuspike.train.mixture import SWEEP_GRID_NAMES, legacy_mixture, mixture_key, resolve_mixture
 from neuspike.train.terms import DEFAULT_LOSSES, DEFAULT_SEQUENCE_LOSSES, legacy_losses, resolve_losses
 from neuspike.utils.checks import check_int
 
@@ -51,8 +52,9 @@ SWEEP_POINTS: tuple[tuple[float, int, str], ...] = (
 #: The light x noise report's points (every light scale at every noise level, S = 128) joined to the sweeps'.
 LIGHT_NOISE_POINTS: tuple[tuple[float, int, str], ...] = SWEEP_POINTS + tuple(
     (light, 128, n) for light in sorted(LIGHTS) if light != 1 / 4 for n in ("small", "medium", "high"))
-#: Which points ``sweep_fraction`` draws from (``sweep_grid``).
+#: Which points the ``sweep`` data term draws from (its ``grid``).
 SWEEP_GRIDS: dict[str, tuple[tuple[float, int, str], ...]] = {"sweeps": SWEEP_POINTS, "light-noise": LIGHT_NOISE_POINTS}
+assert tuple(SWEEP_GRIDS) == SWEEP_GRID_NAMES  # (the sweep data term checks a grid's name without this module)
 #: Pan speed of the sweeps (px/s at the 400x250 sensor's scale).
 SWEEP_SPEED_PX_S = 1000.0
 _PHOTO_DEFAULT: tuple[str, ...] = ("astronaut", "brick", "cat", "cell", "coffee", "grass", "hubble_deep_field",
@@ -158,40 +160,15 @@ class WindowData:
         residual blocks, the decoders and the head are held as ``init_from`` gave them, so the spike-only
         variant the run exports is those weights bit for bit, and every step is a fusion step
         (``spike_only_fraction`` is not used). Default ``"all"``.
-    sweep_fraction : float
-        Fraction of cells drawn at the full sweeps' conditions: (L, S, noise) one of the sweeps' 12
-        points (:data:`SWEEP_POINTS`, drawn uniformly) in place of the drawn light, motion scale and
-        noise level, and pans and dead leaves moving at the sweeps' 1000 px/s (scaled as every speed
-        is) in place of a speed from ``speed_range``; the scene kinds, photographs, scales and
-        directions are drawn as for every cell. The mixture spreads light, speed, S and noise
-        independently over wide ranges, so a sweep's point (a slow pan at L = 1/4, S = 128 with heavy
-        noise, say) is a small corner of it. The validation windows are drawn the same way. Default 0
-        (off; earlier specs and their shard keys mean 0).
-    sweep_grid : ``"sweeps"`` or ``"light-noise"``
-        The points ``sweep_fraction`` draws from: the three sweeps' 12 (:data:`SWEEP_POINTS`, the
-        default) or those joined to the light x noise report's 20 (:data:`LIGHT_NOISE_POINTS`: 24, every
-        light scale at every noise level), where light and noise meet as the report crosses them.
-    sweep_scenes : bool
-        With ``sweep_fraction``: the sweep cells also take the sweeps' scenes, the four kinds of
-        ``bench.harness.grid`` (pan, zoom, fan, still) in equal shares (the kind drawn from its own stream,
-        ``derive_rng(seed, "sweep-kind", split, index)``), each with the sweeps' own parameters (the
-        ``SceneSpec`` defaults: a zoom at 5 Hz about the centre, 3 blades of 30 degrees and contrast
-        0.25 turning at 1500 rpm about the centre), on the training photographs at the drawn scales.
-        The mixture draws fans and zooms with random parameters and dead leaves for 40 % of its
-        cells; the sweeps' fan turns its blade tips at several thousand px/s. Default False (earlier
-        specs and their shard keys mean False).
-    sweep_scene_weights : (pan, zoom, fan, still) or None
-        With ``sweep_scenes``: the relative shares of the four kinds among the sweep cells (drawn from
-        the same stream), e.g. ``(1, 1, 4, 1)`` for four fans to each pan. Default None: equal shares
-        (the draws, and shard keys, of specs without the field).
-    broad_fraction : float
-        Fraction of the picture cells (pan, zoom, fan, still) whose picture is a broad-leaves image (the
-        first frame of a still ``dead_leaves`` scene whose smallest leaf is 5-15 % of the view's side:
-        wide, mildly shaded regions with about half the sharp edges of the small-leaved scenes) in place
-        of a training photograph's region. The choice, the leaf size and the scene's seed come from a
-        stream of their own, and every other draw of the cell is as it would be with the photograph, so
-        a shard with the fraction differs from one without only in those pictures. 0 to 1; default 0
-        (earlier specs and their shard keys mean 0).
+    mixture : {term: fraction or {parameter: value}}
+        The data terms mixed into the draw (:mod:`neuspike.train.mixture`): ``sweep`` (a share of the
+        cells at the sweeps' points, ``grid`` ``"sweeps"`` (the three sweeps' 12, :data:`SWEEP_POINTS`) or
+        ``"light-noise"`` (with the light x noise report's, :data:`LIGHT_NOISE_POINTS`: 24), panning at the
+        sweeps' 1000 px/s, with ``scenes`` the sweeps' own four scenes in shares ``scene_weights``) and
+        ``broad`` (a share of the picture cells with a broad-leaves picture); a bare number is the
+        fraction. Default: none (the base draw alone, as every spec before the terms). The earlier fields
+        (``sweep_fraction``, ``sweep_grid``, ``sweep_scenes``, ``sweep_scene_weights``, ``broad_fraction``)
+        are read into it (:func:`neuspike.train.mixture.legacy_mixture`), and the shard keys stay theirs.
     """
 
     kind: ClassVar[str] = "windows"
@@ -211,11 +188,7 @@ class WindowData:
     scale_range: tuple[float, float] | None = None
     crop_trim: int = 0
     train_parts: str = "all"
-    sweep_fraction: float = 0.0
-    sweep_grid: str = "sweeps"
-    sweep_scenes: bool = False
-    sweep_scene_weights: tuple[float, float, float, float] | None = None
-    broad_fraction: float = 0.0
+    mixture: dict[str, Any] = field(default_factory=dict)
     losses: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_LOSSES))
 
     #: What ``train_parts`` may be.
@@ -229,29 +202,11 @@ class WindowData:
             raise InputError(f"crop_trim: expected a whole number of pixels 0..7, got {self.crop_trim!r}")
         for name in ("view", "train_items", "val_items", "workers"):
             _whole(name, getattr(self, name), 1)
-        for name in ("spike_only_fraction", "sweep_fraction", "broad_fraction"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
-                raise InputError(f"{name}: expected a fraction in [0, 1], got {value!r}")
-            put(self, name, float(value))
-        if not isinstance(self.sweep_scenes, bool):
-            raise InputError(f"sweep_scenes: expected true or false, got {self.sweep_scenes!r}")
-        if self.sweep_scenes and not self.sweep_fraction:
-            raise InputError("sweep_scenes: applies to the sweep cells; give sweep_fraction > 0 too")
-        if self.sweep_grid not in SWEEP_GRIDS:
-            raise InputError(f"sweep_grid: expected one of {', '.join(SWEEP_GRIDS)}, got {self.sweep_grid!r}")
-        if self.sweep_grid != "sweeps" and not self.sweep_fraction:
-            raise InputError("sweep_grid: applies to the sweep cells; give sweep_fraction > 0 too")
-        if self.sweep_scene_weights is not None:
-            w = self.sweep_scene_weights
-            if isinstance(w, (str, bytes)) or not hasattr(w, "__len__") or len(w) != 4 or not all(
-                    not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
-                    for v in w) or not sum(w) > 0:
-                raise InputError("sweep_scene_weights: expected four weights >= 0 (pan, zoom, fan, still), "
-                                 f"not all zero, got {w!r}")
-            if not self.sweep_scenes:
-                raise InputError("sweep_scene_weights: applies to the sweep scenes; give sweep_scenes true too")
-            put(self, "sweep_scene_weights", tuple(float(v) for v in w))
+        value = self.spike_only_fraction
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
+            raise InputError(f"spike_only_fraction: expected a fraction in [0, 1], got {value!r}")
+        put(self, "spike_only_fraction", float(value))
+        put(self, "mixture", resolve_mixture(self.mixture, "windows"))
         put(self, "losses", resolve_losses(self.losses))
         if self.val_view is not None:
             try:
@@ -297,16 +252,7 @@ class WindowData:
             key["val_view"] = list(self.val_view)
         if self.scale_range is not None:  # likewise
             key["scale_range"] = list(self.scale_range)
-        if self.sweep_fraction:  # likewise
-            key["sweep_fraction"] = self.sweep_fraction
-        if self.sweep_grid != "sweeps":  # likewise
-            key["sweep_grid"] = self.sweep_grid
-        if self.sweep_scenes:  # likewise
-            key["sweep_scenes"] = True
-        if self.sweep_scene_weights is not None:  # likewise
-            key["sweep_scene_weights"] = list(self.sweep_scene_weights)
-        if self.broad_fraction:  # likewise
-            key["broad_fraction"] = self.broad_fraction
+        key.update(mixture_key(self.mixture, "windows"))  # (the earlier fields' entries: the same keys)
         return key
 
 
@@ -338,8 +284,10 @@ class SequenceData:
     between the last image and the same image from a second pass over the last ``length - length // 2`` windows
     started from a zero state; ``empty``: the spatial spread of the image that one window without events gives
     from a zero state). The earlier fields ``l1``, ``ssim``, ``temporal``, ``occlusion_alpha``, ``history`` and
-    ``empty`` are read into those terms. ``partial_first``: share of the training runs
-    whose first window is cut short (:func:`neuspike.train.sequences.partial_window`; 0: none).
+    ``empty`` are read into those terms. ``mixture``: the data terms (:mod:`neuspike.train.mixture`):
+    ``partial_first``, a share of the training runs whose first window is cut short
+    (:func:`neuspike.train.sequences.partial_window`; default none; the earlier field of that name is
+    read into it).
     ``sensor``: how each sequence's event camera is drawn beyond its threshold, a key of
     :data:`neuspike.train.sequences.SENSOR_DRAWS` (``"nominal"``: the noise level's stages only, as
     every spec before the field; ``"randomised"``: per-pixel mismatch, refractory period, leak, shot
@@ -370,7 +318,7 @@ class SequenceData:
     workers: int = 1
     length: int = 8
     warmup_windows: int = 2
-    partial_first: float = 0.0
+    mixture: dict[str, Any] = field(default_factory=dict)
     sensor: str = "nominal"
     losses: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_SEQUENCE_LOSSES))
 
@@ -413,8 +361,7 @@ class SequenceData:
         if not 0 <= self.warmup_windows < self.length:
             raise InputError(f"warmup_windows: expected 0..{self.length - 1}, got {self.warmup_windows}")
         put(self, "losses", resolve_losses(self.losses, "sequences"))
-        if not (isinstance(self.partial_first, (int, float)) and 0.0 <= self.partial_first <= 1.0):
-            raise InputError(f"partial_first: expected a share in [0, 1], got {self.partial_first!r}")
+        put(self, "mixture", resolve_mixture(self.mixture, "sequences"))
         if "history" in self.losses and self.length < 2:
             raise InputError("losses.history: the second pass needs sequences of at least 2 windows (length >= 2)")
 
@@ -640,6 +587,8 @@ def _data_section(d: Mapping[str, Any], where: str) -> DataSection:
         d["view"] = tuple(d["view"])
     # the earlier loss fields become their registered terms
     d, d["losses"] = legacy_losses({k: v for k, v in d.items() if k != "losses"}, d.get("losses"), kind)
+    # and the earlier data fields their data terms
+    d, d["mixture"] = legacy_mixture({k: v for k, v in d.items() if k != "mixture"}, d.get("mixture"), kind)
     return _strict(DATA_KINDS[kind], d, f"{where} (data)")
 
 

@@ -55,7 +55,7 @@ from neuspike.train.terms import TERMS, Step, sum_terms
 __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell", "load_sample", "save_sample",
            "shard_paths", "simulate_cell"]
 
-#: The sweeps' scene kinds (``bench.harness.grid.SCENE_KINDS``), drawn alike for ``sweep_scenes`` cells.
+#: The sweeps' scene kinds (``bench.harness.grid.SCENE_KINDS``), drawn alike for the sweep data term's scene cells.
 SWEEP_SCENE_KINDS = ("pan", "zoom", "fan", "still")
 #: Effects every training cell declares (the sweeps' defaults).
 BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
@@ -101,13 +101,14 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
 
 
 def _broad_source(spec: TrainSpec, source_dir: Path, split: str, index: int, size: tuple[int, int]) -> str | None:
-    """With ``broad_fraction``: for a drawn share of the cells, a broad-leaves picture of ``size`` saved
+    """With the ``broad`` data term: for its share of the cells, a broad-leaves picture of ``size`` saved
     under ``source_dir`` (the first frame of a still ``dead_leaves`` scene, smallest leaf 5-15 % of the
     side), from a stream of its own; None for the other cells."""
-    if not spec.data.broad_fraction:
+    broad = spec.data.mixture.get("broad")
+    if broad is None:
         return None
     rng = derive_rng(spec.seed, "broad-picture", split, int(index))
-    if not rng.random() < spec.data.broad_fraction:
+    if not rng.random() < broad["fraction"]:
         return None
     radius, seed = float(rng.uniform(0.05, 0.15)), int(rng.integers(2**31))
     path = source_dir / f"{split}-{index:06d}-broad-{seed}.npy"
@@ -132,15 +133,17 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     kind = kinds[int(rng.choice(len(kinds), p=np.array(list(KIND_WEIGHTS.values())) / sum(KIND_WEIGHTS.values())))]
     # validation at the sweeps' frame when asked (whole-frame offsets show only there), else the square view
     size = tuple(data.val_view) if split == "val" and data.val_view is not None else (data.view, data.view)
-    # a cell at one of the sweeps' points (only drawn when asked, so earlier specs draw what they drew)
-    at_sweep = bool(data.sweep_fraction) and bool(rng.random() < data.sweep_fraction)
-    sweep_scene = at_sweep and data.sweep_scenes
+    # a cell at one of the sweeps' points (the sweep data term; only drawn when asked, so earlier specs draw
+    # what they drew)
+    sweep = data.mixture.get("sweep")
+    at_sweep = sweep is not None and bool(rng.random() < sweep["fraction"])
+    sweep_scene = at_sweep and sweep["scenes"]
     if sweep_scene:  # the sweeps' four kinds alike, from a stream of its own (the cell's later draws follow the kind)
         kind_rng = derive_rng(spec.seed, "sweep-kind", split, int(index))
-        if data.sweep_scene_weights is None:  # equal shares (the draw of specs without the weights)
+        if sweep["scene_weights"] is None:  # equal shares (the draw of specs without the weights)
             kind = SWEEP_SCENE_KINDS[int(kind_rng.integers(len(SWEEP_SCENE_KINDS)))]
         else:
-            w = np.asarray(data.sweep_scene_weights, dtype=float)
+            w = np.asarray(sweep["scene_weights"], dtype=float)
             kind = SWEEP_SCENE_KINDS[int(kind_rng.choice(len(SWEEP_SCENE_KINDS), p=w / w.sum()))]
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
@@ -178,7 +181,7 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         else:
             scene = SceneSpec(kind="still", image=image, size=size)
     if at_sweep:
-        points = SWEEP_GRIDS[data.sweep_grid]
+        points = SWEEP_GRIDS[sweep["grid"]]
         light, motion, noise = points[int(rng.integers(len(points)))]
     else:
         lo, hi = data.light_range
@@ -189,12 +192,12 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
     sim_seed = int(rng.integers(2**31))
     info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
-    if data.broad_fraction:  # (the descriptions of earlier specs' cells stay as they were)
+    if "broad" in data.mixture:  # (the descriptions of earlier specs' cells stay as they were)
         info["broad"] = kind != "dead_leaves" and "-broad-" in Path(scene.image).name
-    if data.sweep_fraction:  # (the descriptions of earlier specs' cells stay as they were)
+    if sweep is not None:  # (the descriptions of earlier specs' cells stay as they were)
         info["at_sweep"] = at_sweep
-    if data.sweep_scenes:
-        info["sweep_scene"] = sweep_scene
+        if sweep["scenes"]:
+            info["sweep_scene"] = sweep_scene
     return scene, condition, sim_seed, info
 
 

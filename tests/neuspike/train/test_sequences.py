@@ -550,8 +550,18 @@ def test_partial_first_cuts_the_first_window_of_that_share_of_runs_and_leaves_th
     assert torch.equal(cut["voxels"][1:], plain["voxels"][1:])
     assert torch.equal(cut["targets"], plain["targets"]) and torch.equal(cut["flow"], plain["flow"])
     assert not torch.equal(cut["voxels"][0], plain["voxels"][0])
-    with pytest.raises(InputError, match="partial_first"):
-        DataSpec(partial_first=1.5)
+    with pytest.raises(InputError, match="mixture.partial_first.fraction"):
+        DataSpec(mixture={"partial_first": 1.5})
+    with pytest.raises(InputError, match="unknown terms.*'sweep'.*for sequences: partial_first"):
+        DataSpec(mixture={"sweep": 0.5})
+    # the earlier field reads into the term, and the shard key does not change
+    from neuspike.train.spec import spec_from_dict
+
+    earlier = TrainSpec(method="e2vid", data=DataSpec()).as_dict()
+    earlier["data"].pop("mixture")
+    earlier["data"]["partial_first"] = 0.25
+    read = spec_from_dict(earlier).data
+    assert read.mixture == {"partial_first": {"fraction": 0.25}} and read.key() == DataSpec().key()
 
 
 def test_runs_with_different_seeds_never_share_a_shard():

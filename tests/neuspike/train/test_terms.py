@@ -104,3 +104,33 @@ def test_sequence_specs_name_their_own_terms_and_read_the_earlier_fields():
     assert spec_from_dict(earlier).data.losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0},
                                                    "temporal": {"weight": 0.5, "occlusion_alpha": 20.0},
                                                    "history": {"weight": 0.3}}
+
+
+def test_the_earlier_data_fields_read_into_the_data_terms_with_the_same_shard_keys():
+    """The shipped cards' specs name sweep_fraction, sweep_grid, sweep_scenes, sweep_scene_weights and
+    broad_fraction: they read into the sweep and broad data terms, and the shard key is the one those
+    fields made (their names and values, reconstructed here from the card itself)."""
+    from neuspike.train.mixture import DATA_TERMS, resolve_mixture
+
+    assert list(DATA_TERMS) == ["sweep", "broad"]
+    cards = sorted(PACKAGE_WEIGHTS.glob("neuspike-net*.json"))
+    assert cards
+    for card in cards:
+        written = json.loads(card.read_text())["training"]["spec"]["data"]
+        data = spec_from_dict(json.loads(card.read_text())["training"]["spec"]).data
+        key = data.key(0)
+        sweep = data.mixture["sweep"]
+        assert sweep["fraction"] == written["sweep_fraction"] == key["sweep_fraction"] > 0
+        assert sweep["scenes"] is written["sweep_scenes"] is key["sweep_scenes"] is True
+        assert list(sweep["scene_weights"]) == written["sweep_scene_weights"] == key["sweep_scene_weights"]
+        assert sweep["grid"] == written.get("sweep_grid", "sweeps") == key.get("sweep_grid", "sweeps")
+        assert "broad" not in data.mixture and "broad_fraction" not in key and not written.get("broad_fraction")
+    assert resolve_mixture({"broad": 0, "sweep": {"fraction": 0}}) == {}  # fraction 0 at the defaults: nothing
+    with pytest.raises(InputError, match=r"mixture: unknown terms \['wobble'\]; the registered ones"):
+        resolve_mixture({"wobble": 0.5})
+    with pytest.raises(InputError, match=r"mixture.sweep: unknown parameters \['points'\]; it takes fraction, grid"):
+        resolve_mixture({"sweep": {"fraction": 0.5, "points": 3}})
+    spec = apply_settings(TrainSpec(), ['data.mixture.sweep={"fraction": 0.5, "grid": "light-noise"}'])
+    assert spec.data.mixture == {"sweep": {"fraction": 0.5, "grid": "light-noise", "scenes": False,
+                                           "scene_weights": None}}
+    assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec

@@ -10,6 +10,7 @@ import torch
 from neuspike.errors import InputError
 from neuspike.train import TrainSpec, WindowData, learning_rate, load_spec
 from neuspike.train.loop import Trainer
+from neuspike.train.mixture import LEGACY_DATA_FIELDS, legacy_mixture
 from neuspike.train.terms import LEGACY_FIELDS, legacy_losses
 from neuspike.train.windows import augment, draw_cell, load_sample, save_sample, simulate_cell
 
@@ -17,10 +18,11 @@ DATA_FIELDS = set(WindowData.__dataclass_fields__)
 
 
 def window_data(**kw) -> WindowData:
-    """A data section from its fields and the earlier loss fields' names (read into the loss terms, as a
-    spec file of those fields is)."""
+    """A data section from its fields and the earlier loss and data fields' names (read into the loss and
+    data terms, as a spec file of those fields is)."""
     rest, losses = legacy_losses(kw, kw.pop("losses", None))
-    return WindowData(**rest, losses=losses)
+    rest, mixture = legacy_mixture(rest, rest.pop("mixture", None))
+    return WindowData(**rest, losses=losses, mixture=mixture)
 
 
 def tiny_spec(tmp_path, **kw) -> TrainSpec:
@@ -28,7 +30,8 @@ def tiny_spec(tmp_path, **kw) -> TrainSpec:
                 view=16, train_items=3, val_items=2, val_every=2, checkpoint_every=2, warmup=2, workers=1,
                 precision="float32", threads=1)
     base.update(kw)
-    data = window_data(**{k: base.pop(k) for k in list(base) if k in DATA_FIELDS or k in LEGACY_FIELDS})
+    data = window_data(**{k: base.pop(k) for k in list(base) if k in DATA_FIELDS or k in LEGACY_FIELDS
+                             or k in LEGACY_DATA_FIELDS["windows"]})
     return TrainSpec(data=data, **base)
 
 
@@ -122,15 +125,15 @@ def test_sweep_cells_sit_on_the_sweeps_points_and_leave_earlier_draws_alone(tmp_
         elif scene.kind in ("pan", "dead_leaves"):
             assert np.hypot(*scene.velocity_px_s) >= 5000.0 * 40 / 400 - 1e-6
     assert len({(c[1].light, c[1].motion, c[1].noise) for c in at}) >= 10
-    assert WindowData(sweep_fraction=0.25).key(0)["sweep_fraction"] == 0.25
+    assert WindowData(mixture={"sweep": 0.25}).key(0)["sweep_fraction"] == 0.25
     assert "sweep_fraction" not in WindowData().key(0)
     old = tiny_spec(tmp_path)
     assert "at_sweep" not in draw_cell(old, "train", 0, tmp_path)[3]
     everyone = tiny_spec(tmp_path, sweep_fraction=1.0)
     assert all(draw_cell(everyone, "train", i, tmp_path)[3]["at_sweep"] for i in range(20))
     for bad in (-0.1, 1.5, True, "half"):
-        with pytest.raises(InputError, match="sweep_fraction"):
-            WindowData(sweep_fraction=bad)
+        with pytest.raises(InputError, match="mixture.sweep.fraction"):
+            WindowData(mixture={"sweep": bad})
 
 
 def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_rest_alone(tmp_path):
@@ -165,13 +168,13 @@ def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_r
             assert np.hypot(*scene.velocity_px_s) == pytest.approx(1000.0 * 40 / 400)
     assert set(kinds) == set(SWEEP_SCENE_KINDS) and "dead_leaves" not in kinds
     assert all(10 <= kinds.count(k) <= 22 for k in SWEEP_SCENE_KINDS)  # about 60 / 4 each
-    assert WindowData(sweep_fraction=0.5, sweep_scenes=True).key(0)["sweep_scenes"] is True
-    assert "sweep_scenes" not in WindowData(sweep_fraction=0.5).key(0)
+    assert WindowData(mixture={"sweep": {"fraction": 0.5, "scenes": True}}).key(0)["sweep_scenes"] is True
+    assert "sweep_scenes" not in WindowData(mixture={"sweep": 0.5}).key(0)
     assert "sweep_scene" not in draw_cell(base, "train", 0, tmp_path)[3]
-    with pytest.raises(InputError, match="sweep_scenes.*sweep_fraction"):
-        WindowData(sweep_scenes=True)
-    with pytest.raises(InputError, match="sweep_scenes"):
-        WindowData(sweep_fraction=0.5, sweep_scenes="yes")
+    with pytest.raises(InputError, match=r"mixture.sweep.scenes.*mixture.sweep.fraction > 0"):
+        WindowData(mixture={"sweep": {"scenes": True}})
+    with pytest.raises(InputError, match="mixture.sweep.scenes"):
+        WindowData(mixture={"sweep": {"fraction": 0.5, "scenes": "yes"}})
 
 
 def test_broad_fraction_swaps_only_the_picture_for_a_broad_leaves_one(tmp_path):
@@ -214,10 +217,10 @@ def test_broad_fraction_swaps_only_the_picture_for_a_broad_leaves_one(tmp_path):
     assert "broad" not in draw_cell(base, "train", 0, tmp_path)[3]
     assert spec.data.key(0)["broad_fraction"] == 0.5 and "broad_fraction" not in base.data.key(0)
     for bad in (-0.1, 1.5, True, "half"):
-        with pytest.raises(InputError, match="broad_fraction"):
-            WindowData(broad_fraction=bad)
-    args = build_parser().parse_args(["neuspike-net", "--broad-fraction", "0.3", "--out", str(tmp_path / "r")])
-    assert spec_from_args(args).data.broad_fraction == 0.3
+        with pytest.raises(InputError, match="mixture.broad.fraction"):
+            WindowData(mixture={"broad": bad})
+    args = build_parser().parse_args(["neuspike-net", "--set", "data.mixture.broad=0.3", "--out", str(tmp_path / "r")])
+    assert spec_from_args(args).data.mixture == {"broad": {"fraction": 0.3}}
 
 
 def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
@@ -229,7 +232,7 @@ def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
     equal = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True)
     fans = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=[0, 0, 1, 0])
     heavy = tiny_spec(tmp_path, view=40, sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=(1, 1, 4, 1))
-    assert heavy.data.sweep_scene_weights == (1.0, 1.0, 4.0, 1.0)
+    assert heavy.data.mixture["sweep"]["scene_weights"] == (1.0, 1.0, 4.0, 1.0)
     counts = {"fan": 0, "other": 0}
     for i in range(200):
         before, only, most = (draw_cell(s, "train", i, tmp_path) for s in (equal, fans, heavy))
@@ -245,17 +248,17 @@ def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
     assert heavy.data.key(0)["sweep_scene_weights"] == [1.0, 1.0, 4.0, 1.0]
     assert "sweep_scene_weights" not in equal.data.key(0)
     for bad in ((1, 1, 1), (0, 0, 0, 0), (1, -1, 1, 1), (1, 1, float("nan"), 1), "1,1,4,1", (True, 1, 1, 1)):
-        with pytest.raises(InputError, match="sweep_scene_weights"):
-            WindowData(sweep_fraction=0.5, sweep_scenes=True, sweep_scene_weights=bad)
-    with pytest.raises(InputError, match="sweep_scene_weights.*sweep_scenes"):
-        WindowData(sweep_fraction=0.5, sweep_scene_weights=(1, 1, 4, 1))
-    args = build_parser().parse_args(["neuspike-net", "--sweep-fraction", "0.5", "--sweep-scenes",
-                                      "--sweep-scene-weights", "1,1,4,1", "--out", str(tmp_path / "r")])
-    assert spec_from_args(args).data.sweep_scene_weights == (1.0, 1.0, 4.0, 1.0)
-    args = build_parser().parse_args(["neuspike-net", "--sweep-fraction", "0.5", "--sweep-scenes",
-                                      "--sweep-scene-weights", "1,4", "--out", str(tmp_path / "r")])
-    with pytest.raises(InputError, match="--sweep-scene-weights: expected PAN,ZOOM,FAN,STILL"):
-        spec_from_args(args)
+        with pytest.raises(InputError, match="mixture.sweep.scene_weights"):
+            WindowData(mixture={"sweep": {"fraction": 0.5, "scenes": True, "scene_weights": bad}})
+    with pytest.raises(InputError, match="mixture.sweep.scene_weights.*mixture.sweep.scenes"):
+        WindowData(mixture={"sweep": {"fraction": 0.5, "scene_weights": (1, 1, 4, 1)}})
+    args = build_parser().parse_args(["neuspike-net", "--set",
+                                      'data.mixture.sweep={"fraction": 0.5, "scenes": true, "scene_weights": [1,1,4,1]}',
+                                      "--out", str(tmp_path / "r")])
+    assert spec_from_args(args).data.mixture["sweep"]["scene_weights"] == (1.0, 1.0, 4.0, 1.0)
+    for retired in ("--sweep-fraction", "--broad-fraction"):  # the earlier flags are gone, not silently ignored
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["neuspike-net", retired, "0.5"])
 
 
 def test_saved_windows_load_back_identically(tmp_path):
@@ -1014,9 +1017,9 @@ def test_the_light_noise_sweep_grid_draws_the_reports_points_and_leaves_old_keys
         c = draw_cell(new, "train", i, tmp_path)[1]
         drawn.add((c.light, c.motion, c.noise))
     assert drawn <= set(LIGHT_NOISE_POINTS) and len(drawn - set(SWEEP_POINTS)) > 5
-    with pytest.raises(InputError, match="sweep_grid: expected one of"):
+    with pytest.raises(InputError, match="mixture.sweep.grid: expected one of"):
         tiny_spec(tmp_path, sweep_fraction=1.0, sweep_grid="everything")
-    with pytest.raises(InputError, match="give sweep_fraction > 0"):
+    with pytest.raises(InputError, match=r"mixture.sweep.grid: .*give mixture.sweep.fraction > 0"):
         tiny_spec(tmp_path, sweep_grid="light-noise")
 
 
