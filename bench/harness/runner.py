@@ -300,7 +300,7 @@ def resolve_methods(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
             "modalities": modalities, "history_s": history_s}
 
 
-#: The device of every sweep folder written before the sweep's identity held its arithmetic.
+#: The device of every sweep before the sweep's identity held its arithmetic (their part files keep their ids).
 LEGACY_DEVICE = "cpu"
 
 
@@ -316,27 +316,6 @@ def arithmetic(spec: SweepSpec, setup: WorkerSetup) -> dict[str, Any]:
         if created.method is not None and "precision" in created.method.params:
             precision[name] = str(created.method.params["precision"])
     return {"device": setup.device.strip().lower(), "precision": precision}
-
-
-def _legacy_arithmetic(out: Path, new: dict[str, Any]) -> dict[str, Any]:
-    """The arithmetic of a folder whose ``config.json`` predates it: the CPU, and each learned
-    method's precision as the folder's rows record it (``method_params``); a method no row
-    records (no finished cell, nothing to mix) keeps the precision ``new`` gives it."""
-    recorded: dict[str, str] = {}
-    for path in sorted((out / "parts").glob("*.csv"))[:1] or [out / "results.csv"]:
-        try:
-            frame = read_csv(path)
-        except (OSError, ValueError):
-            continue
-        for name, text in frame.drop_duplicates("method")[["method", "method_params"]].itertuples(index=False):
-            try:
-                params = json.loads(text).get("params", {}) if isinstance(text, str) and text else {}
-            except (ValueError, AttributeError):
-                params = {}
-            if "precision" in params:
-                recorded[str(name)] = str(params["precision"])
-    return {"device": LEGACY_DEVICE,
-            "precision": {m: recorded.get(m, p) for m, p in new["precision"].items()}}
 
 
 def cell_id(spec: SweepSpec, resolved: dict[str, Any], cell: grids.Cell,
@@ -387,8 +366,6 @@ def check_config(out: Path, config: dict[str, Any], force: bool, *, key: str = "
     except (OSError, ValueError, AttributeError) as exc:
         old = {"unreadable": str(exc)}
     new = json.loads(canonical_json(config))
-    if key == "sweep" and isinstance(old, dict) and "device" not in old and "precision" not in old and "device" in new:
-        old = {**old, **_legacy_arithmetic(out, new)}  # written before the identity held them
     if old == new:
         return False
     if not force:

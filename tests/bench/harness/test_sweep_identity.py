@@ -117,18 +117,16 @@ def test_cell_ids_hold_the_arithmetic_except_the_cpu_in_float32(learned):
     assert cell_id(s, resolved, cell, {"device": "cpu", "precision": {NAME: "bfloat16"}}) != base
 
 
-def test_a_folder_written_before_the_identity_resumes_as_the_cpu_with_its_recorded_precision(learned, tmp_path):
+def test_a_folder_written_before_the_identity_is_refused_by_name_and_replaced_with_force(learned, tmp_path):
+    """Every committed report's configuration names its device and precisions; a run folder from before
+    they were part of the identity is not guessed at: the refusal names what it lacks, --force reruns it."""
     first = run_sweep(spec(), tmp_path, QUIET)
     before = read_csv(first.results_path)
     _strip_arithmetic(tmp_path)
-    again = run_sweep(spec(), tmp_path, QUIET)
-    assert again.n_computed == 0  # the same cells: nothing recomputed, nothing refused
-    assert read_csv(again.results_path)["value"].equals(before["value"])
-    # the rows say which precision ran: a resume in another one is refused
-    _strip_arithmetic(tmp_path)
-    learned("bfloat16")
-    with pytest.raises(ConfigMismatch, match=rf"precision\.{NAME} float32 -> bfloat16"):
+    with pytest.raises(ConfigMismatch, match=r"device absent -> cpu.*--force"):
         run_sweep(spec(), tmp_path, QUIET)
+    again = run_sweep(spec(), tmp_path, Execution(progress=False, report=False, force=True))
+    assert read_csv(again.results_path)["value"].equals(before["value"])
 
 
 # ----------------------------------------------------------------------------------------------
