@@ -202,6 +202,23 @@ register_data_term(DataTerm(
     "broad", key=lambda params: {"broad_fraction": params["fraction"]},
     doc="a share of the picture cells whose picture is a broad-leaves image (a still dead-leaves scene whose "
         "smallest leaf is 5-15 % of the view's side) in place of a training photograph's region"))
+def _check_fast(params: dict[str, Any]) -> dict[str, Any]:
+    speeds = params["speeds"]
+    if isinstance(speeds, (str, bytes)) or not hasattr(speeds, "__len__") or not speeds or not all(
+            not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in speeds):
+        raise InputError(f"mixture.fast_pans.speeds: expected multiples of the sweeps' pan speed > 0, got {speeds!r}")
+    motion = params["motion"]
+    if isinstance(motion, bool) or not isinstance(motion, int) or motion < 1:
+        raise InputError(f"mixture.fast_pans.motion: expected a motion scale S >= 1, got {motion!r}")
+    return {**params, "speeds": tuple(float(v) for v in speeds)}
+
+
+register_data_term(DataTerm(
+    "fast_pans", defaults={"speeds": (2.0, 4.0, 8.0, 16.0), "motion": 256}, check=_check_fast,
+    key=lambda params: {"fast_pans": [params["fraction"], list(params["speeds"]), params["motion"]]},
+    doc="a share of the cells (of those not at the sweeps' points) panning a training photograph at a multiple of "
+        "the sweeps' 1000 px/s (one of speeds, uniformly) at motion scale S = motion, at one of the sweeps' five "
+        "light scales, without sensor noise: the fast-motion reports' conditions on the training photographs"))
 register_data_term(DataTerm(
     "partial_first",
     doc="a share of the training runs whose first window is cut short (a run that starts mid-window, as a "

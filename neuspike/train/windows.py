@@ -57,6 +57,8 @@ __all__ = ["MOTION_PREFIXES", "WindowTask", "augment", "build_shard", "draw_cell
 
 #: The sweeps' scene kinds (``bench.harness.grid.SCENE_KINDS``), drawn alike for the sweep data term's scene cells.
 SWEEP_SCENE_KINDS = ("pan", "zoom", "fan", "still")
+#: The light scales of fast-pan cells: the sweeps' five (``bench.harness.grid.PAPER_LIGHTS``).
+FAST_PAN_LIGHTS = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2)
 #: Effects every training cell declares (the sweeps' defaults).
 BASE_EFFECTS = (effect("initial_charge"),) + tuple(EVENT_PRESETS["clean"])
 SENSOR_SIZE = (400, 250)
@@ -145,9 +147,18 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         else:
             w = np.asarray(sweep["scene_weights"], dtype=float)
             kind = SWEEP_SCENE_KINDS[int(kind_rng.choice(len(SWEEP_SCENE_KINDS), p=w / w.sum()))]
+    # a fast pan (the fast_pans data term), from a stream of its own among the cells not at a sweep point: the
+    # cell's own draws are all made as without it, and the kind, speed and condition replaced
+    fast = data.mixture.get("fast_pans")
+    fast_rng = derive_rng(spec.seed, "fast-pan", split, int(index)) if fast is not None and not at_sweep else None
+    at_fast = fast_rng is not None and bool(fast_rng.random() < fast["fraction"])
+    if at_fast:
+        kind = "pan"
     angle = rng.uniform(0, 2 * np.pi)
     lo, hi = data.speed_range
     speed = SWEEP_SPEED_PX_S if at_sweep else float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    if at_fast:
+        speed = SWEEP_SPEED_PX_S * float(fast["speeds"][int(fast_rng.integers(len(fast["speeds"])))])
     if data.scale_range is None:  # the original draw: the sensor shrunk to the view
         relative_scale = None
         speed *= size[0] / SENSOR_SIZE[0]
@@ -188,12 +199,16 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         light = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
         motion = int(data.motions[int(rng.integers(len(data.motions)))])
         noise = data.noise_levels[int(rng.integers(len(data.noise_levels)))]
+        if at_fast:
+            light, motion, noise = float(fast_rng.choice(FAST_PAN_LIGHTS)), int(fast["motion"]), "none"
     condition = Condition(light=light, motion=motion, noise=noise, effects=BASE_EFFECTS)
     sim_seed = int(rng.integers(2**31))
     info = {"split": split, "index": int(index), "kind": kind, "light": light, "motion": motion, "noise": noise,
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
     if "broad" in data.mixture:  # (the descriptions of earlier specs' cells stay as they were)
         info["broad"] = kind != "dead_leaves" and "-broad-" in Path(scene.image).name
+    if fast is not None:  # (likewise)
+        info["fast_pan"] = at_fast
     if sweep is not None:  # (the descriptions of earlier specs' cells stay as they were)
         info["at_sweep"] = at_sweep
         if sweep["scenes"]:

@@ -223,6 +223,44 @@ def test_broad_fraction_swaps_only_the_picture_for_a_broad_leaves_one(tmp_path):
     assert spec_from_args(args).data.mixture == {"broad": {"fraction": 0.3}}
 
 
+def test_fast_pans_pan_a_share_of_the_other_cells_at_multiples_of_the_sweeps_speed(tmp_path):
+    """mixture.fast_pans p: about p of the cells not at a sweep point are pans of a training photograph at one
+    of the given multiples of 1000 px/s (scaled with the region as every speed is), at S = motion, one of the
+    sweeps' light scales and no noise; every other cell is the one drawn without the term, and a spec
+    without it keeps its key."""
+    from bench.harness import grid
+    from neuspike.train.windows import FAST_PAN_LIGHTS
+
+    assert set(FAST_PAN_LIGHTS) == set(grid.PAPER_LIGHTS)
+    common = dict(view=40, scale_range=(0.5, 1.5), sweep_fraction=0.3)
+    base = tiny_spec(tmp_path, **common)
+    spec = tiny_spec(tmp_path, **common, losses=None,
+                     mixture={"sweep": {"fraction": 0.3}, "fast_pans": {"fraction": 0.5, "speeds": [4, 16]}})
+    fast, others, multiples = 0, 0, set()
+    for i in range(160):
+        before, after = draw_cell(base, "train", i, tmp_path), draw_cell(spec, "train", i, tmp_path)
+        if before[3]["at_sweep"]:
+            assert after[:3] == before[:3] and after[3]["fast_pan"] is False
+            continue
+        others += 1
+        if not after[3]["fast_pan"]:
+            assert after[:3] == before[:3]
+            continue
+        fast += 1
+        scene, cond = after[0], after[1]
+        assert scene.kind == "pan" and cond.motion == 256 and cond.noise == "none" and cond.light in FAST_PAN_LIGHTS
+        # 1000 px/s times the multiple times the region's scale (0.5-1.5: the two multiples' ranges do not overlap)
+        speed = np.hypot(*scene.velocity_px_s)
+        assert 0.5 - 1e-9 <= speed / 4000.0 <= 1.5 + 1e-9 or 0.5 - 1e-9 <= speed / 16000.0 <= 1.5 + 1e-9
+        multiples.add(4 if speed < 7000.0 else 16)
+    assert others > 80 and abs(fast / others - 0.5) < 4 * (0.25 / others) ** 0.5 and multiples == {4, 16}
+    assert spec.data.key(0)["fast_pans"] == [0.5, [4.0, 16.0], 256] and "fast_pans" not in base.data.key(0)
+    for bad in ({"fraction": 0.5, "speeds": []}, {"fraction": 0.5, "speeds": [0]}, {"fraction": 0.5, "motion": 0},
+                {"speeds": [2]}):
+        with pytest.raises(InputError, match="mixture.fast_pans"):
+            WindowData(mixture={"fast_pans": bad})
+
+
 def test_sweep_scene_weights_set_the_shares_of_the_sweep_scenes(tmp_path):
     """sweep_scene_weights: the sweep cells' kinds in the given shares (all fans with (0, 0, 1, 0); about
     4 / 7 fans with (1, 1, 4, 1)), each at one of the sweeps' points; the other cells unchanged."""
