@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from neuspike.errors import InputError
+from neuspike.train.terms import add_to_registry, complete_terms, move_fields
 
 __all__ = ["DATA_TERMS", "DataTerm", "LEGACY_DATA_FIELDS", "SEQUENCE_DATA_TERMS", "SWEEP_GRID_NAMES", "legacy_mixture",
            "mixture_key", "register_data_term", "resolve_mixture"]
@@ -66,11 +67,7 @@ _REGISTRIES: dict[str, dict[str, DataTerm]] = {"windows": DATA_TERMS, "sequences
 def register_data_term(term: DataTerm, kind: str = "windows") -> DataTerm:
     """Add ``term`` to the registry of ``kind`` (``"windows"`` or ``"sequences"``; a name registered twice is an
     error)."""
-    registry = _REGISTRIES[kind]
-    if term.name in registry:
-        raise InputError(f"data term {term.name!r} is registered already")
-    registry[term.name] = term
-    return term
+    return add_to_registry(_REGISTRIES[kind], term, "data term")
 
 
 def _fraction(where: str, value: Any) -> float:
@@ -89,25 +86,9 @@ def resolve_mixture(mixture: Any, kind: str = "windows") -> dict[str, dict[str, 
         Naming an unknown term (with the registered ones), an unknown parameter (with the term's), or a
         bad value.
     """
-    if not isinstance(mixture, Mapping):
-        raise InputError(f"mixture: expected {{term: fraction or {{parameter: value}}}}, got {mixture!r}")
-    registry = _REGISTRIES[kind]
-    unknown = sorted(set(mixture) - set(registry))
-    if unknown:
-        listed = ", ".join(registry) or "none"
-        raise InputError(f"mixture: unknown terms {unknown}; the registered ones for {kind}: {listed}")
     out: dict[str, dict[str, Any]] = {}
-    for name, term in registry.items():
-        if name not in mixture:
-            continue
-        given = mixture[name]
-        given = {"fraction": given} if not isinstance(given, Mapping) else dict(given)
-        bad = sorted(set(given) - set(term.defaults) - {"fraction"})
-        if bad:
-            raise InputError(f"mixture.{name}: unknown parameters {bad}; it takes fraction"
-                             + "".join(f", {k}" for k in term.defaults))
-        params = {"fraction": _fraction(f"mixture.{name}.fraction", given.get("fraction", 0.0)),
-                  **{k: given.get(k, v) for k, v in term.defaults.items()}}
+    for name, term, params in complete_terms(mixture, _REGISTRIES[kind], section="mixture", amount="fraction",
+                                             check_amount=_fraction, default_amount=lambda t: 0.0):
         if params["fraction"] == 0:
             changed = [k for k, v in term.defaults.items() if params[k] != v]
             if not changed:
@@ -143,19 +124,7 @@ def legacy_mixture(section: Mapping[str, Any], mixture: Any = None, kind: str = 
     ``mixture`` (the section's own, if any) starts empty where it is ``None``; an earlier field sets its
     term's parameter (``None`` values, the earlier "not set", are skipped).
     """
-    rest = dict(section)
-    out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in (mixture or {}).items()}
-    for key, (term, param) in LEGACY_DATA_FIELDS[kind].items():
-        if key not in rest:
-            continue
-        value = rest.pop(key)
-        if value is None:
-            continue
-        current = out.get(term, {})
-        current = {"fraction": current} if not isinstance(current, Mapping) else dict(current)
-        current[param] = value
-        out[term] = current
-    return rest, out
+    return move_fields(section, LEGACY_DATA_FIELDS[kind], mixture or {}, amount="fraction")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -32,8 +32,8 @@ from typing import Any, Callable, Mapping
 from neuspike.errors import InputError
 
 __all__ = ["DEFAULT_LOSSES", "DEFAULT_SEQUENCE_LOSSES", "LEGACY_FIELDS", "LossTerm", "SEQUENCE_TERMS", "SequenceStep",
-           "Step", "TERMS", "edge_mask", "gate_targets", "legacy_losses",
-           "register_term", "resolve_losses", "sum_terms"]
+           "Step", "TERMS", "add_to_registry", "complete_terms", "edge_mask", "gate_targets", "legacy_losses",
+           "move_fields", "register_term", "resolve_losses", "sum_terms"]
 
 #: The noise levels a term may name (as :data:`neuspike.train.spec.NOISE_LEVELS`).
 _NOISE_LEVELS = ("none", "small", "medium", "high")
@@ -72,14 +72,52 @@ SEQUENCE_TERMS: dict[str, LossTerm] = {}
 REGISTRIES: dict[str, dict[str, LossTerm]] = {"windows": TERMS, "sequences": SEQUENCE_TERMS}
 
 
+def add_to_registry(registry: dict[str, Any], term: Any, what: str) -> Any:
+    """Add ``term`` (anything with a ``name``) to ``registry``; a name registered twice is an error naming ``what``
+    it is. Loss terms and data terms (:mod:`neuspike.train.mixture`) alike."""
+    if term.name in registry:
+        raise InputError(f"{what} {term.name!r} is registered already")
+    registry[term.name] = term
+    return term
+
+
 def register_term(term: LossTerm, kind: str = "windows") -> LossTerm:
     """Add ``term`` to the registry of ``kind`` (``"windows"`` or ``"sequences"``; a name registered twice is an
     error)."""
-    registry = REGISTRIES[kind]
-    if term.name in registry:
-        raise InputError(f"loss term {term.name!r} is registered already")
-    registry[term.name] = term
-    return term
+    return add_to_registry(REGISTRIES[kind], term, "loss term")
+
+
+def complete_terms(given: Any, registry: Mapping[str, Any], *, section: str, amount: str,
+                   check_amount: Callable[[str, Any], float], default_amount: Callable[[Any], float]
+                   ) -> list[tuple[str, Any, dict[str, Any]]]:
+    """The terms a spec's ``section`` names, checked against ``registry`` and completed, in the registry's order:
+    ``[(name, term, {amount: a, **every parameter})]`` (a bare number is the term's ``amount``: a loss term's
+    weight, a data term's fraction; what is left out takes its default). The caller drops or refuses terms at 0.
+
+    Raises
+    ------
+    InputError
+        Naming an unknown term (with the registered ones), an unknown parameter (with the term's), or a bad amount.
+    """
+    if not isinstance(given, Mapping):
+        raise InputError(f"{section}: expected {{term: {amount} or {{parameter: value}}}}, got {given!r}")
+    unknown = sorted(set(given) - set(registry))
+    if unknown:
+        raise InputError(f"{section}: unknown terms {unknown}; the registered ones: {', '.join(registry) or 'none'}")
+    out = []
+    for name, term in registry.items():
+        if name not in given:
+            continue
+        named = given[name]
+        named = {amount: named} if not isinstance(named, Mapping) else dict(named)
+        bad = sorted(set(named) - set(term.defaults) - {amount})
+        if bad:
+            raise InputError(f"{section}.{name}: unknown parameters {bad}; it takes {amount}"
+                             + "".join(f", {k}" for k in term.defaults))
+        params = {amount: check_amount(f"{section}.{name}.{amount}", named.get(amount, default_amount(term))),
+                  **{k: named.get(k, v) for k, v in term.defaults.items()}}
+        out.append((name, term, params))
+    return out
 
 
 @dataclass
@@ -131,24 +169,9 @@ def resolve_losses(losses: Any, kind: str = "windows") -> dict[str, dict[str, An
         Naming an unknown term (with the registered ones), an unknown parameter (with the term's), or
         a bad value.
     """
-    if not isinstance(losses, Mapping):
-        raise InputError(f"losses: expected {{term: weight or {{parameter: value}}}}, got {losses!r}")
-    registry = REGISTRIES[kind]
-    unknown = sorted(set(losses) - set(registry))
-    if unknown:
-        raise InputError(f"losses: unknown terms {unknown}; the registered ones: {', '.join(registry)}")
     out: dict[str, dict[str, Any]] = {}
-    for name, term in registry.items():
-        if name not in losses:
-            continue
-        given = losses[name]
-        given = {"weight": given} if not isinstance(given, Mapping) else dict(given)
-        bad = sorted(set(given) - set(term.defaults) - {"weight"})
-        if bad:
-            raise InputError(f"losses.{name}: unknown parameters {bad}; it takes weight"
-                             + "".join(f", {k}" for k in term.defaults))
-        params = {"weight": _weight(f"losses.{name}.weight", given.get("weight", term.weight)),
-                  **{k: given.get(k, v) for k, v in term.defaults.items()}}
+    for name, term, params in complete_terms(losses, REGISTRIES[kind], section="losses", amount="weight",
+                                             check_amount=_weight, default_amount=lambda t: t.weight):
         if params["weight"] == 0 and all(params[k] == v for k, v in term.defaults.items()):
             continue  # a term at weight 0 with its defaults adds nothing: as if not named
         out[name] = term.check(params) if term.check is not None else params
@@ -188,11 +211,20 @@ def legacy_losses(section: Mapping[str, Any], losses: Any = None, kind: str = "w
     :data:`DEFAULT_SEQUENCE_LOSSES`) where it is ``None``; an earlier field sets its term's parameter
     (``None`` values, the earlier "not set", are skipped).
     """
-    rest = dict(section)
     defaults, fields = ((DEFAULT_LOSSES, LEGACY_FIELDS) if kind == "windows"
                         else (DEFAULT_SEQUENCE_LOSSES, SEQUENCE_LEGACY_FIELDS))
-    out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v)
-                           for k, v in (defaults if losses is None else losses).items()}
+    return move_fields(section, fields, defaults if losses is None else losses, amount="weight",
+                       default_amount=lambda term: 1.0 if term in ("l1", "ssim", "temporal") else 0.0)
+
+
+def move_fields(section: Mapping[str, Any], fields: Mapping[str, tuple[str, str]], start: Mapping[str, Any], *,
+                amount: str, default_amount: Callable[[str], float] | None = None
+                ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Move the earlier fields of ``section`` (``fields``: field -> (term, parameter)) into a copy of the terms
+    mapping ``start``: ``(section without them, terms)``. A field of value ``None`` (the earlier "not set") is
+    dropped; a term a field creates gets ``default_amount(term)`` as its ``amount`` where given."""
+    rest = dict(section)
+    out: dict[str, Any] = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in start.items()}
     for key, (term, param) in fields.items():
         if key not in rest:
             continue
@@ -200,10 +232,10 @@ def legacy_losses(section: Mapping[str, Any], losses: Any = None, kind: str = "w
         if value is None:
             continue
         current = out.get(term, {})
-        current = {"weight": current} if not isinstance(current, Mapping) else dict(current)
+        current = {amount: current} if not isinstance(current, Mapping) else dict(current)
         current[param] = value
-        if "weight" not in current:
-            current["weight"] = 1.0 if term in ("l1", "ssim", "temporal") else 0.0
+        if amount not in current and default_amount is not None:
+            current[amount] = default_amount(term)
         out[term] = current
     return rest, out
 

@@ -552,7 +552,7 @@ def test_partial_first_cuts_the_first_window_of_that_share_of_runs_and_leaves_th
     assert not torch.equal(cut["voxels"][0], plain["voxels"][0])
     with pytest.raises(InputError, match="mixture.partial_first.fraction"):
         DataSpec(mixture={"partial_first": 1.5})
-    with pytest.raises(InputError, match="unknown terms.*'sweep'.*for sequences: partial_first"):
+    with pytest.raises(InputError, match="unknown terms.*'sweep'.*the registered ones: partial_first"):
         DataSpec(mixture={"sweep": 0.5})
     # the earlier field reads into the term, and the shard key does not change
     from neuspike.train.spec import spec_from_dict
