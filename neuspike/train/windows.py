@@ -148,7 +148,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
             w = np.asarray(sweep["scene_weights"], dtype=float)
             kind = SWEEP_SCENE_KINDS[int(kind_rng.choice(len(SWEEP_SCENE_KINDS), p=w / w.sum()))]
     # a fast pan (the fast_pans data term), from a stream of its own among the cells not at a sweep point: the
-    # cell's own draws are all made as without it, and the kind, speed and condition replaced
+    # kind becomes a pan (the cell's later draws follow it, as for the sweep scenes), and the speed and the
+    # condition are drawn as without the term and then replaced; the other cells are drawn as without it
     fast = data.mixture.get("fast_pans")
     fast_rng = derive_rng(spec.seed, "fast-pan", split, int(index)) if fast is not None and not at_sweep else None
     at_fast = fast_rng is not None and bool(fast_rng.random() < fast["fraction"])
