@@ -96,7 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
         f"  python -m bench.timing                                   # quick: {QUICK['repeats']} timed calls per method at "
         f"{_sizes_text(QUICK['sizes'])}\n"
         "  python -m bench.timing --full --weights ../shared/weights/firenet\n"
-        "  python -m bench.timing --methods tfp,tfi --sizes 400x250 --results runs/light\n\n"
+        "  python -m bench.timing --methods tfp,tfi --sizes 400x250 --results runs/light\n"
+        "  python -m bench.timing --plugin my_methods.py --methods mine,snm --results none\n\n"
         "--full: the paper's Table 2 resolutions (" + _sizes_text(FULL["sizes"]) + ").\n"
         "recurrent methods (FireNet): ms per frame is one network step (one event voxel grid); the whole call,\n"
         "warm-up over the event history included, is in timing.csv (median_ms). Timings on a shared machine\n"
@@ -116,6 +117,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that "
                         "other processes leave idle)")
     MethodOptions.add_arguments(parser, flags=("weights", "device", "precision", "compile"))
+    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                        help="import MODULE (a module name or a .py path) to register extra methods, as the sweeps "
+                        "do (repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -154,6 +158,10 @@ def run(args: argparse.Namespace) -> Path:
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     if options.compiled and warmup < 1:
         raise InputError("--compile needs at least one warm-up call (--warmup 1 or more): the first call compiles")
+    from bench.harness.cells import load_plugins, plugin_names
+
+    plugins = plugin_names(tuple(args.plugin))
+    load_plugins(plugins)  # before the names are checked against the registry
     names = method_names(args.methods)
 
     from neuspike import methods as registry
@@ -184,6 +192,8 @@ def run(args: argparse.Namespace) -> Path:
                          "planes": PLANES, "scene": "pan:camera", "threads": torch.get_num_threads(),
                          "device": options.device, "precision": precision, "compiled": options.compiled,
                          "weights": portable_path(weights) if weights is not None else None}}
+    if plugins:  # what registered the methods (absent from runs without plug-ins, as before)
+        config["timing"]["plugins"] = list(plugins)
     write_json(out / "config.json", config)
     meta = {"source": source_state(), "versions": package_versions(), "machine": machine(),
             "command": command_line(), "executor": {"executor": "timing", "workers": 1},

@@ -341,3 +341,30 @@ def test_measure_runs_learned_methods_in_the_precision_asked_and_says_so(test_me
     assert made["neuspike-net-spike"].method.params["precision"] == "float32"
     with pytest.raises(InputError, match="precision: expected one of auto, float32, bfloat16, got 'half'"):
         registry.create_many(["neuspike-net-spike", "tt-mean"], precision="half")
+
+
+def test_timing_command_times_a_method_a_plug_in_file_registers(tmp_path):
+    """Table 2 takes --plugin as the sweeps do: the file's method is timed and the plug-in recorded."""
+    from bench.harness.cells import forget_plugin
+
+    plugin = tmp_path / "tt_plugin.py"
+    plugin.write_text("from tests.doubles import MeanRate\n\n\n"
+                      "def register_methods(register):\n    register('tt-plugged', MeanRate)\n")
+    out = tmp_path / "timing"
+    try:
+        assert timing.main(["--plugin", str(plugin), "--methods", "tt-plugged", "--sizes", "32x24", "--repeats", "1",
+                            "--warmup", "0", "--history-windows", "0", "--results", "none", "--no-report",
+                            "--out", str(out)]) == 0
+    finally:
+        registry.unregister("tt-plugged")
+        forget_plugin(str(plugin))
+    frame = pd.read_csv(out / "timing.csv")
+    assert frame["method"].tolist() == ["tt-plugged"] and frame["status"].tolist() == ["ok"]
+    assert json.loads((out / "config.json").read_text())["timing"]["plugins"] == [str(plugin)]
+
+
+def test_timing_command_refuses_a_plug_in_file_that_does_not_exist(tmp_path, capsys):
+    code = timing.main(["--plugin", str(tmp_path / "absent.py"), "--methods", "snm", "--results", "none",
+                        "--out", str(tmp_path / "timing")])
+    err = capsys.readouterr().err
+    assert code != 0 and "plug-in file" in err and "does not exist" in err and not (tmp_path / "timing").exists()
