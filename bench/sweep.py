@@ -107,7 +107,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
 def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
     """The requested method names (``--methods``, else every registered one), plug-ins loaded and each
     name checked against the registry."""
-    from bench.harness.cells import load_plugins, plugin_names
+    from neuspike.methods.plugins import load_plugins, plugin_names
     from neuspike import methods as registry
 
     load_plugins(plugin_names(tuple(args.plugin)))

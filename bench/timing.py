@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> Path:
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     if options.compiled and warmup < 1:
         raise InputError("--compile needs at least one warm-up call (--warmup 1 or more): the first call compiles")
-    from bench.harness.cells import load_plugins, plugin_names
+    from neuspike.methods.plugins import load_plugins, plugin_names
 
     plugins = plugin_names(tuple(args.plugin))
     load_plugins(plugins)  # before the names are checked against the registry

@@ -23,7 +23,7 @@ In each cell
    truth clipped to [0, 1].
 
 Worker set-up (:class:`WorkerSetup`, applied once per process and idempotent): plug-in modules are
-imported (:func:`load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable)
+imported (:func:`neuspike.methods.plugins.load_plugins`; also those named in the ``NEUSPIKE_PLUGINS`` environment variable)
 and torch's intra-op thread count is set. The weights folder and device travel in the set-up and are
 passed to :func:`neuspike.methods.create_many`, which builds each method once per process
 (:func:`instances`); nothing is exported through the environment.
@@ -31,16 +31,11 @@ passed to :func:`neuspike.methods.create_many`, which builds each method once pe
 
 from __future__ import annotations
 
-import hashlib
-import importlib
-import importlib.util
 import json
 import os
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,17 +44,16 @@ import torch
 from bench.harness.grid import Cell
 from bench.harness.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
-from neuspike.errors import InputError, one_line
+from neuspike.errors import one_line
 from neuspike.utils.jsonio import canonical_json
 from neuspike.utils.parallel import set_threads
+from neuspike.methods.plugins import load_plugins, plugin_names
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, isolated_outliers, static_texture
 from neuspike.simulation.cache import RecordingCache
 from neuspike.simulation.cell import simulate_recording
 from neuspike.simulation.recording import Recording, SensorConfig
 from neuspike.simulation.window import static_region
 
-#: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
-PLUGINS_ENV = "NEUSPIKE_PLUGINS"
 #: The metrics of every row, in the order rows are produced.
 METRICS: tuple[str, ...] = (*FULL_REFERENCE_METRICS, "static_texture", "specks")
 DATA_RANGE = 1.0
@@ -138,75 +132,8 @@ class CellResult:
 # Worker set-up
 # ----------------------------------------------------------------------------------------------
 
-_LOADED_PLUGINS: dict[str, Any] = {}
 #: (name, weights folder, device) -> [registry entry, Created, warmed-up flag], per process.
 _INSTANCES: dict[tuple[str, str | None, str], list[Any]] = {}
-
-
-def plugin_names(extra: tuple[str, ...] = ()) -> tuple[str, ...]:
-    """``extra`` followed by the modules in ``NEUSPIKE_PLUGINS``, without repeats."""
-    env = tuple(p.strip() for p in os.environ.get(PLUGINS_ENV, "").split(",") if p.strip())
-    return tuple(dict.fromkeys(extra + env))
-
-
-def load_plugins(plugins: tuple[str, ...]) -> list[str]:
-    """Import each plug-in once per process; return the names newly imported.
-
-    A plug-in is a module that registers methods when imported, or that defines a function
-    ``register_methods()`` (the same callable a ``neuspike.methods`` entry point names), which is
-    then called once. It is named by its dotted module name (importable on the worker's
-    ``sys.path``) or by a path to a ``.py`` file.
-
-    Raises
-    ------
-    InputError
-        A plug-in that cannot be found or whose import fails (the message carries the cause).
-    """
-    loaded = []
-    for plugin in plugins:
-        key = _plugin_key(plugin)
-        if key in _LOADED_PLUGINS:
-            continue
-        try:
-            if plugin.endswith(".py") or os.sep in plugin:
-                path = Path(plugin).resolve()
-                if not path.is_file():
-                    raise InputError(f"plug-in file {plugin!r} does not exist")
-                name = f"neuspike_plugin_{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:8]}"
-                module = sys.modules.get(name)
-                if module is None:
-                    spec = importlib.util.spec_from_file_location(name, path)
-                    module = importlib.util.module_from_spec(spec)
-                    sys.modules[name] = module
-                    try:
-                        spec.loader.exec_module(module)
-                    except BaseException:
-                        del sys.modules[name]
-                        raise
-            else:
-                module = importlib.import_module(plugin)
-            hook = getattr(module, "register_methods", None)
-            if callable(hook):
-                hook(registry.register)
-        except InputError:
-            raise
-        except Exception as exc:
-            raise InputError(f"plug-in {plugin!r} failed to load: {one_line(exc)}") from exc
-        _LOADED_PLUGINS[key] = module
-        loaded.append(plugin)
-    return loaded
-
-
-def _plugin_key(plugin: str) -> str:
-    """One name per plug-in: a file's resolved path (``a.py`` and ``/abs/a.py`` are one plug-in), else the module name."""
-    return str(Path(plugin).resolve()) if plugin.endswith(".py") or os.sep in plugin else plugin
-
-
-def forget_plugin(plugin: str) -> None:
-    """Forget that ``plugin`` was imported (tests that unregister its methods use this)."""
-    module = _LOADED_PLUGINS.pop(_plugin_key(plugin), None)
-    if module is not None:
-        sys.modules.pop(module.__name__, None)
 
 
 def prepare_worker(setup: WorkerSetup) -> int:

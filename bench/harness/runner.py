@@ -53,7 +53,8 @@ import pandas as pd
 
 from bench.harness import grid as grids
 from bench.harness.axes import AXES
-from bench.harness.cells import CellTask, WorkerSetup, instances, plugin_names, prepare_worker, run_cell
+from bench.harness.cells import CellTask, WorkerSetup, instances, prepare_worker, run_cell
+from neuspike.methods.plugins import plugin_names
 from bench.harness.executors import DaskExecutor, make_executor
 from bench.harness.grid import Grid
 from bench.harness.provenance import LoadWatch, collect, finish, now_iso
@@ -171,7 +172,7 @@ class Execution:
     use_cache : bool
         ``False`` simulates every cell afresh and stores nothing.
     plugins : tuple of str
-        Plug-in modules each worker imports (see :func:`bench.harness.cells.load_plugins`).
+        Plug-in modules each worker imports (see :func:`neuspike.methods.plugins.load_plugins`).
     device : str
         Torch device of learned methods (default ``"cpu"``). It and the precision each learned
         method resolves on it change the results, so both are part of the sweep's identity

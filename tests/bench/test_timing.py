@@ -345,7 +345,7 @@ def test_measure_runs_learned_methods_in_the_precision_asked_and_says_so(test_me
 
 def test_timing_command_times_a_method_a_plug_in_file_registers(tmp_path):
     """Table 2 takes --plugin as the sweeps do: the file's method is timed and the plug-in recorded."""
-    from bench.harness.cells import forget_plugin
+    from neuspike.methods.plugins import forget_plugin
 
     plugin = tmp_path / "tt_plugin.py"
     plugin.write_text("from tests.doubles import MeanRate\n\n\n"

@@ -9,7 +9,7 @@ import pytest
 
 import neuspike.simulation.cell as cell_module
 from bench.harness import grid as grids
-from bench.harness.cells import forget_plugin, load_plugins
+from neuspike.methods.plugins import forget_plugin, load_plugins
 from bench.harness.results import read_csv
 from bench.harness.runner import Execution, SweepSpec, run_sweep
 from neuspike import methods as registry

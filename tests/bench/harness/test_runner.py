@@ -17,7 +17,8 @@ import pytest
 
 from bench.harness import grid as grids
 from neuspike.simulation.cache import load_recording, save_recording
-from bench.harness.cells import METRICS, forget_plugin, load_plugins
+from bench.harness.cells import METRICS
+from neuspike.methods.plugins import forget_plugin, load_plugins
 from bench.harness.results import COLUMNS, TIMING_COLUMNS, drop_timing, read_csv
 from bench.harness.runner import ConfigMismatch, Execution, SweepSpec, run_sweep
 from bench.sweep import main
