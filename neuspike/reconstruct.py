@@ -103,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
             "  python -m neuspike.reconstruct --method tfp-w32 --spikes rec.dat --height 250 --width 400 --plane 500 --out rec\n"
             "  python -m neuspike.reconstruct --method tfp,tfi --spikes helicopter.npz --out rec\n"
             "  python -m neuspike.reconstruct --method firenet --events driving.hdf5 --at 3.4 --weights weights/ --out rec\n"
+            "  python -m neuspike.reconstruct --plugin my_methods.py --method mine,tfi --spikes rec.npz --out rec\n"
             "\n"
             f"Learned methods read their weights from --weights DIR or the {WEIGHTS_ENV} environment variable.\n"
             "Exit status: 0 on success, 2 on an error (one line on stderr)."
@@ -134,6 +135,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: a simulated window's own length, else 256)")
     MethodOptions.add_arguments(p, flags=("weights", "device", "precision"))
+    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                   help="import MODULE (a module name or a .py path) to register extra methods, as the benchmarks "
+                        "do (repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
     p.add_argument("--gt", type=Path, metavar="IMAGE", help="ground-truth image (.png or .npy) for PSNR and SSIM")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     return p
@@ -287,6 +291,14 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
     )
 
 
+def _load_plugins(args: argparse.Namespace) -> None:
+    """Import the plug-ins named by --plugin and NEUSPIKE_PLUGINS: their methods are listed and run like the
+    others (after the usage checks, so that a usage error imports nothing heavy)."""
+    from neuspike.methods.plugins import load_plugins, plugin_names
+
+    load_plugins(plugin_names(tuple(args.plugin)))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 ok, 2 error).
 
@@ -303,10 +315,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code or 0)
     try:
         if args.list:
+            _load_plugins(args)
             list_methods()
             return 0
         if not args.method:
             raise InputError("give --method NAME (see --list) or --list")
+        _load_plugins(args)
         spec = spec_from_args(args)
         from neuspike.formats.staging import check_writable_folder
 

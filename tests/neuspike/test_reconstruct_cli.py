@@ -248,3 +248,30 @@ def test_precision_flag_reaches_the_learned_methods(tmp_path, precision):
     assert spec.precision == precision
     (method,) = _prepare_methods(spec)
     assert method.params["precision"] == precision and method.describe()["params"]["precision"] == precision
+
+
+@needs_npz_reader
+def test_a_plug_in_file_registers_a_method_the_command_lists_and_runs(npz_recording, tmp_path, capsys):
+    """--plugin (as the benchmarks take it): the file's method is listed and reconstructs like any other."""
+    from neuspike.methods.plugins import forget_plugin
+
+    path, _, spk = npz_recording
+    plugin = tmp_path / "zz_plugin.py"
+    plugin.write_text("from tests.neuspike.test_reconstruct_cli import RateMethod\n\n\n"
+                      "def register_methods(register):\n    register('zz-plugged', RateMethod)\n")
+    try:
+        assert main(["--plugin", str(plugin), "--list"]) == 0
+        assert "zz-plugged" in capsys.readouterr().out
+        assert main(["--plugin", str(plugin), "--method", "zz-plugged", "--spikes", str(path),
+                     "--out", str(tmp_path / "o")]) == 0
+    finally:
+        registry.unregister("zz-plugged")
+        forget_plugin(str(plugin))
+    rate = spk.mean(axis=0)
+    np.testing.assert_allclose(np.load(tmp_path / "o" / "zz-plugged.npy"), rate / rate.max(), atol=1e-6)
+
+
+def test_a_missing_plug_in_file_exits_2_with_one_line(tmp_path, capsys):
+    assert main(["--plugin", str(tmp_path / "absent.py"), "--list"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: plug-in file") and "does not exist" in err and err.count("\n") == 1
