@@ -421,3 +421,24 @@ def test_command_refuses_an_unknown_precision(recording, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "--precision" in err[0] and "float16" in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_command_runs_a_method_a_plug_in_file_registers(recording, tmp_path):
+    """--plugin (as the benchmarks take it): a plug-in's variant of TFP streams the frames TFP-w32 streams."""
+    from neuspike.methods.plugins import forget_plugin
+
+    folder, _ = recording
+    plugin = tmp_path / "zz_video_plugin.py"
+    plugin.write_text("from baselines.tfp import TFP\n\n\n"
+                      "def register_methods(register):\n    register('zz-video-w32', TFP, params={'window': 32})\n")
+    common = ("--spikes", folder / "spikes.dat", "--height", H, "--width", W, "--fps", 1000, "--frames", "npy",
+              "--no-progress")
+    try:
+        assert _run(*common, "--plugin", plugin, "--method", "zz-video-w32", "--out", tmp_path / "a") == 0
+    finally:
+        registry.unregister("zz-video-w32")
+        forget_plugin(str(plugin))
+    assert _run(*common, "--method", "tfp-w32", "--out", tmp_path / "b") == 0
+    ours, theirs = sorted((tmp_path / "a" / "zz-video-w32").glob("*.npy")), sorted((tmp_path / "b" / "tfp-w32").glob("*.npy"))
+    assert len(ours) == len(theirs) > 1
+    assert all(np.array_equal(np.load(a), np.load(b)) for a, b in zip(ours, theirs))
