@@ -168,3 +168,24 @@ def test_full_writes_its_own_report_folder_unless_told(tmp_path, monkeypatch):
     assert (full / "accuracy_vs_speed.png").exists() and not (quick / "accuracy_vs_speed.png").exists()
     assert vb.main(["--plot-only"]) == 0
     assert (quick / "accuracy_vs_speed.png").exists()
+
+
+def test_a_plug_in_files_method_runs_beside_the_registered_ones(bench_run, tmp_path):
+    """--plugin (as the sweeps take it): the plug-in's variant of TFP scores as TFP on the same recording."""
+    from neuspike.methods import unregister
+    from neuspike.methods.plugins import forget_plugin
+
+    argv, cache, _ = bench_run
+    plugin = tmp_path / "zz_bench_plugin.py"
+    plugin.write_text("from baselines.tfp import TFP\n\n\n"
+                      "def register_methods(register):\n    register('zz-bench-tfp', TFP, params={'window': None})\n")
+    out = tmp_path / "out"
+    try:
+        assert vb.main(["--size", "48x32", "--duration", "0.005", "--fps", "2000", "--methods", "tfp,zz-bench-tfp",
+                        "--plugin", str(plugin), "--cache", str(cache), "--out", str(out), "--no-progress"]) == 0
+    finally:
+        unregister("zz-bench-tfp")
+        forget_plugin(str(plugin))
+    rows = pd.read_csv(out / "results.csv").set_index("method")
+    assert rows.loc["zz-bench-tfp", "status"] == "ok"
+    assert rows.loc["zz-bench-tfp", "mean_psnr_db"] == pytest.approx(rows.loc["tfp", "mean_psnr_db"])
