@@ -90,9 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     m = p.add_argument_group("what to run")
     m.add_argument("--methods", help="comma-separated registry names (default: every registered method; each "
                    "recording runs those whose inputs it has)")
-    MethodOptions.add_arguments(m, flags=("weights",))
-    m.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE (a module name or a .py path) in every worker to register extra methods")
+    MethodOptions.add_arguments(m, flags=("weights", "plugin"))
     r = p.add_argument_group("how to run")
     r.add_argument("--out", help="output folder (default: runs/dataset-<DIR's name>)")
     r.add_argument("--executor", choices=EXECUTORS, default="local", help="local worker processes (default) or Dask")

@@ -77,10 +77,7 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
                    help="event history before each window for recurrent methods to warm up on, in window "
                    f"durations (default: {DEFAULT_HISTORY_WINDOWS:g}; simulated only when a recurrent "
                    "method is requested)")
-    MethodOptions.add_arguments(g, flags=("weights",))
-    g.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE (a module name or a .py path) in every worker to register extra "
-                   "methods (repeatable); this runs its code, so name only files you trust")
+    MethodOptions.add_arguments(g, flags=("weights", "plugin"))
     r = parser.add_argument_group("how to run")
     r.add_argument("--out", help="output folder (default: runs/<sweep>, runs/<sweep>-full with --full)")
     r.add_argument("--executor", choices=EXECUTORS, default="local",
@@ -107,10 +104,10 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
 def methods_from(args: argparse.Namespace) -> tuple[str, ...]:
     """The requested method names (``--methods``, else every registered one), plug-ins loaded and each
     name checked against the registry."""
-    from neuspike.methods.plugins import load_plugins, plugin_names
+    from neuspike.methods.plugins import load_requested
     from neuspike import methods as registry
 
-    load_plugins(plugin_names(tuple(args.plugin)))
+    load_requested(args.plugin)
     for problem in registry.load_entry_points():
         print(f"warning: a method plug-in failed to load: {problem}", file=sys.stderr)
     if args.methods is not None:  # an empty --methods is an error, not "every method"

@@ -116,10 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, help="untimed calls first (overrides --quick/--full)")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that "
                         "other processes leave idle)")
-    MethodOptions.add_arguments(parser, flags=("weights", "device", "precision", "compile"))
-    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                        help="import MODULE (a module name or a .py path) to register extra methods, as the sweeps "
-                        "do (repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
+    MethodOptions.add_arguments(parser, flags=("weights", "device", "precision", "compile", "plugin"))
     parser.add_argument("--history-windows", type=float, default=DEFAULT_HISTORY_WINDOWS,
                         help=f"event history for recurrent methods, in window durations (default {DEFAULT_HISTORY_WINDOWS:g}, "
                         "as the sweeps)")
@@ -158,10 +155,9 @@ def run(args: argparse.Namespace) -> Path:
     sizes = parse_sizes(args.sizes) if args.sizes else preset["sizes"]
     if options.compiled and warmup < 1:
         raise InputError("--compile needs at least one warm-up call (--warmup 1 or more): the first call compiles")
-    from neuspike.methods.plugins import load_plugins, plugin_names
+    from neuspike.methods.plugins import load_requested
 
-    plugins = plugin_names(tuple(args.plugin))
-    load_plugins(plugins)  # before the names are checked against the registry
+    plugins = load_requested(args.plugin)  # before the names are checked against the registry
     names = method_names(args.methods)
 
     from neuspike import methods as registry

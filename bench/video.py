@@ -440,12 +440,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="seconds of sensor time (default: 0.05; --full: 1)")
     p.add_argument("--fps", type=float, default=1000.0, help="output frames per second of sensor time (default: 1000)")
     p.add_argument("--methods", default="", help="comma list (default: every registered method)")
-    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE (a module name or a .py path) to register extra methods, as the sweeps do "
-                        "(repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
     p.add_argument("--size", type=_size, default=(400, 250), help="sensor WxH (default: 400x250)")
     p.add_argument("--event-history", type=float, default=1.0, help="seconds of event history per frame (default: 1)")
-    MethodOptions.add_arguments(p, flags=("weights",))
+    MethodOptions.add_arguments(p, flags=("weights", "plugin"))
     p.add_argument("--cache", type=Path, help="keep the simulated recording here and reuse it")
     p.add_argument("--threads", type=int, help="torch intra-op threads (default: the usable CPUs that other "
                    "processes leave idle)")
@@ -471,9 +468,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         duration = args.duration if args.duration is not None else (1.0 if args.full else 0.05)
         if not duration > 0:
             raise InputError(f"--duration must be positive, got {duration}")
-        from neuspike.methods.plugins import load_plugins, plugin_names
+        from neuspike.methods.plugins import load_requested
 
-        load_plugins(plugin_names(tuple(args.plugin)))  # their methods run beside the registered ones
+        load_requested(args.plugin)  # their methods run beside the registered ones
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         threads = args.threads
         if threads is None:  # the CPUs other processes leave idle

@@ -134,10 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "neuspike-net set its image's mean level from the spike count")
     p.add_argument("--window-planes", type=int, metavar="N",
                    help="spike window length in planes (default: a simulated window's own length, else 256)")
-    MethodOptions.add_arguments(p, flags=("weights", "device", "precision"))
-    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE (a module name or a .py path) to register extra methods, as the benchmarks "
-                        "do (repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
+    MethodOptions.add_arguments(p, flags=("weights", "device", "precision", "plugin"))
     p.add_argument("--gt", type=Path, metavar="IMAGE", help="ground-truth image (.png or .npy) for PSNR and SSIM")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     return p
@@ -294,9 +291,9 @@ def spec_from_args(args: argparse.Namespace) -> ReconstructSpec:
 def _load_plugins(args: argparse.Namespace) -> None:
     """Import the plug-ins named by --plugin and NEUSPIKE_PLUGINS: their methods are listed and run like the
     others (after the usage checks, so that a usage error imports nothing heavy)."""
-    from neuspike.methods.plugins import load_plugins, plugin_names
+    from neuspike.methods.plugins import load_requested
 
-    load_plugins(plugin_names(tuple(args.plugin)))
+    load_requested(args.plugin)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

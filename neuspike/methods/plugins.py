@@ -13,12 +13,12 @@ import importlib.util
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from neuspike.errors import InputError, one_line
 from neuspike.methods import registry
 
-__all__ = ["PLUGINS_ENV", "forget_plugin", "load_plugins", "plugin_names"]
+__all__ = ["PLUGINS_ENV", "forget_plugin", "load_plugins", "load_requested", "plugin_names"]
 
 #: Environment variable listing plug-in modules (names or ``.py`` paths, comma-separated).
 PLUGINS_ENV = "NEUSPIKE_PLUGINS"
@@ -90,3 +90,11 @@ def forget_plugin(plugin: str) -> None:
     module = _LOADED_PLUGINS.pop(_plugin_key(plugin), None)
     if module is not None:
         sys.modules.pop(module.__name__, None)
+
+
+def load_requested(named: Sequence[str] = ()) -> tuple[str, ...]:
+    """Import the plug-ins a command names (its ``--plugin`` values) and those in ``NEUSPIKE_PLUGINS``;
+    return them all, in that order (what a run records as its plug-ins)."""
+    plugins = plugin_names(tuple(named))
+    load_plugins(plugins)
+    return plugins

@@ -66,7 +66,7 @@ class MethodOptions:
     read_out: str | None = None
 
     #: The options a command may offer, as flags.
-    FLAGS = ("weights", "device", "precision", "compile", "read_out")
+    FLAGS = ("weights", "device", "precision", "compile", "read_out", "plugin")
 
     @staticmethod
     def add_arguments(parser: Any, *, flags: Sequence[str] = ("weights", "device", "precision"),
@@ -100,6 +100,11 @@ class MethodOptions:
                                 "instant; 'window' shows the last full window (at most one window earlier, said in "
                                 "the label), one network step fewer per frame, at the price of frames that lag on "
                                 "fast motion")
+        if "plugin" in flags:
+            parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                                help="import MODULE (a module name or a .py path; in every worker of a parallel run) "
+                                "to register extra methods (repeatable; also the modules in $NEUSPIKE_PLUGINS); this "
+                                "runs its code, so name only files you trust")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "MethodOptions":

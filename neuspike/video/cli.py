@@ -141,9 +141,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="spikes per plane a pixel fires in darkness, mean over pixels (a capped calibration; "
                         "default: the recording's)")
     MethodOptions.add_arguments(p, flags=MethodOptions.FLAGS)
-    p.add_argument("--plugin", action="append", default=[], metavar="MODULE",
-                   help="import MODULE (a module name or a .py path) to register extra methods, as the benchmarks "
-                        "do (repeatable; also NEUSPIKE_PLUGINS); this runs its code, so name only files you trust")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     return p
@@ -490,9 +487,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code or 0)
     try:
         spec = spec_from_args(args)
-        from neuspike.methods.plugins import load_plugins, plugin_names
+        from neuspike.methods.plugins import load_requested
 
-        load_plugins(plugin_names(tuple(args.plugin)))  # after the usage checks: those import nothing heavy
+        load_requested(args.plugin)  # after the usage checks: those import nothing heavy
         run(spec)
     except NeuSpikeError as exc:
         print(f"error: {exc}", file=sys.stderr)

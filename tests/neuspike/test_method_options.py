@@ -31,7 +31,7 @@ def test_every_command_words_each_method_option_the_same_and_sweeps_take_precisi
     offered = {}
     for name, parser in _parsers().items():
         helps = _helps(parser)
-        for flag in ("--weights", "--precision", "--compile", "--read-out"):
+        for flag in ("--weights", "--precision", "--compile", "--read-out", "--plugin"):
             if flag in helps:
                 assert helps[flag] == wording[flag], (name, flag)
                 offered.setdefault(flag, []).append(name)
@@ -40,6 +40,8 @@ def test_every_command_words_each_method_option_the_same_and_sweeps_take_precisi
     assert set(offered["--weights"]) == {"reconstruct", "video", "sweep", "dataset", "timing", "video-bench",
                                          "method-speed"}
     assert {"sweep", "dataset", "timing", "reconstruct", "video"} <= set(offered["--precision"])
+    # every command that runs methods by name loads plug-ins (method-speed times the suite's own targets)
+    assert set(offered["--plugin"]) == {"reconstruct", "video", "sweep", "dataset", "timing", "video-bench"}
 
 
 def test_a_weights_folder_that_is_not_one_is_refused_naming_where_it_came_from(tmp_path, monkeypatch):
