@@ -45,9 +45,9 @@ from bench.harness.grid import Cell
 from bench.harness.results import ERROR, OK, SKIPPED, base_row
 from neuspike import methods as registry
 from neuspike.errors import one_line
+from neuspike.methods.plugins import load_plugins, plugin_names
 from neuspike.utils.jsonio import canonical_json
 from neuspike.utils.parallel import set_threads
-from neuspike.methods.plugins import load_plugins, plugin_names
 from neuspike.metrics import FULL_REFERENCE_METRICS, STATIC_MIN_FRACTION, evaluate, isolated_outliers, static_texture
 from neuspike.simulation.cache import RecordingCache
 from neuspike.simulation.cell import simulate_recording

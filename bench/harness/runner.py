@@ -54,11 +54,11 @@ import pandas as pd
 from bench.harness import grid as grids
 from bench.harness.axes import AXES
 from bench.harness.cells import CellTask, WorkerSetup, instances, prepare_worker, run_cell
-from neuspike.methods.plugins import plugin_names
 from bench.harness.executors import DaskExecutor, make_executor
 from bench.harness.grid import Grid
 from bench.harness.provenance import LoadWatch, collect, finish, now_iso
 from bench.harness.results import ERROR, OK, assemble, part_path, read_csv, write_part
+from neuspike.methods.plugins import plugin_names
 from neuspike.utils.atomic import write_json, write_text
 from neuspike.errors import InputError, NeuSpikeError, one_line
 from neuspike.utils.checks import check_positive_int

@@ -1,8 +1,9 @@
 """Plug-ins: modules that register methods when imported, named on a command line (``--plugin``) or in the
 ``NEUSPIKE_PLUGINS`` environment variable, for methods that are not packaged with an entry point.
 
-Every command that runs methods by name (the sweeps, Table 2's timing, the dataset runner, the
-reconstruction command) loads them through :func:`load_plugins`, once per process.
+Every command that runs methods by name (the sweeps, Table 2's timing, the video benchmark, the dataset
+runner, the reconstruction and video commands) loads them through :func:`load_requested` (the harness's
+workers through :func:`load_plugins`), once per process.
 """
 
 from __future__ import annotations
