@@ -439,14 +439,22 @@ def _distill(step: Step, *, weight: float, teacher: str) -> tuple[Any, dict[str,
 def _check_floor(params: dict[str, Any]) -> dict[str, Any]:
     if params["terms"] not in ("both", "ssim"):
         raise InputError(f"losses.spike_floor.terms: expected both or ssim, got {params['terms']!r}")
+    network = params["network"]
+    if network is not None:
+        if not isinstance(network, str) or not network.endswith(".safetensors"):
+            raise InputError(f"losses.spike_floor.network: expected a spike-only network's .safetensors file, "
+                             f"got {network!r}")
     return _check_noise_weights("losses.spike_floor", params)
 
 
 def _floor_setup(task: Any, params: dict[str, Any]) -> None:
     _fusion_only(task, "losses.spike_floor")
+    if params["network"] is not None:
+        task.floor_network = task.load_teacher(params["network"], "losses.spike_floor.network", spike_only=True)
 
 
-def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str) -> tuple[Any, dict[str, float]]:
+def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str, network: Any
+                 ) -> tuple[Any, dict[str, float]]:
     import torch
 
     if step.variant != "fusion":
@@ -460,7 +468,10 @@ def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str) -
     if weights is None:
         return None, {}
     with torch.no_grad(), step.autocast():
-        floor = task.forward(step.inputs, "spike")
+        if network is None:  # the network's own spike-only self
+            floor = task.forward(step.inputs, "spike")
+        else:  # a trained spike-only network, held: the variant the fusion ships beside
+            floor = task.floor_network(step.inputs[0], *step.inputs[2:])
     excess = (task.crop_losses(step.image, step.target, terms)
               - task.crop_losses(floor, step.target, terms)).clamp_min(0.0)
     if isinstance(weights, torch.Tensor):
@@ -490,10 +501,12 @@ register_term(LossTerm("distill", _distill, defaults={"teacher": None}, weight=0
                        setup=_distill_setup,
                        doc="the student's L1 + SSIM-term loss against a trained network's image (the teacher, run on "
                            "each step's inputs in the step's variant)"))
-register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": None, "terms": "both"}, weight=0.0,
-                       check=_check_floor, setup=_floor_setup,
+register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": None, "terms": "both", "network": None},
+                       weight=0.0, check=_check_floor, setup=_floor_setup,
                        doc="fusion steps: relu(l_fusion - l_spike) per crop, l a crop's L1 + SSIM-term loss (terms "
-                           "'both') or SSIM loss alone ('ssim'), weighted per crop by its noise level's weight"))
+                           "'both') or SSIM loss alone ('ssim'), weighted per crop by its noise level's weight; l_spike "
+                           "the network's own spike-only self, or with network (a spike-only network's .safetensors "
+                           "with its JSON card) that trained network's image, held"))
 
 
 # ----------------------------------------------------------------------------------------------

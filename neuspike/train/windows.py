@@ -369,30 +369,37 @@ class WindowTask:
         # the gate a gate_target term supervises: the noise gate where there is one, else the motion gate
         self.supervised_gate = getattr(self.module, "noise_gate", None) or getattr(self.module, "motion_gate", None)
         self.teacher: torch.nn.Module | None = None
+        self.floor_network: torch.nn.Module | None = None  # the spike_floor term's held spike-only network
         self.terms = [(TERMS[name], params) for name, params in self.losses.items()]
         for term, params in self.terms:
             if term.setup is not None:
                 term.setup(self, params)
         self.needs_convex = any(term.needs_convex for term, _ in self.terms)
 
-    def load_teacher(self, path: str) -> torch.nn.Module:
-        """The teacher's module (the ``distill`` term's ``teacher``): created untrained from its JSON card's parameters, the
-        file loaded by the same loader as every learned method's, held in eval mode without gradient."""
+    def load_teacher(self, path: str, role: str = "teacher", *, spike_only: bool = False) -> torch.nn.Module:
+        """A trained network's module (the ``distill`` term's ``teacher``; with ``role="floor"`` the
+        ``spike_floor`` term's spike-only ``network``): created untrained from its JSON card's parameters,
+        the file loaded by the same loader as every learned method's, held in eval mode without gradient.
+        ``spike_only``: the file must hold a spike-only network (else it must hold one that answers in
+        every variant this run trains)."""
 
         weights, card = Path(path), Path(path).with_suffix(".json")
         if not weights.is_file():
-            raise InputError(f"teacher {path}: no such file")
+            raise InputError(f"{role} {path}: no such file")
         if not card.is_file():
-            raise InputError(f"teacher {path}: no JSON card beside it ({card.name}), which says its architecture")
+            raise InputError(f"{role} {path}: no JSON card beside it ({card.name}), which says its architecture")
         try:
             meta = json.loads(card.read_text())
             params = dict(meta["model"]["params"])
         except (ValueError, KeyError, TypeError) as exc:
-            raise InputError(f"teacher {path}: its card {card.name} has no model parameters ({exc})") from None
+            raise InputError(f"{role} {path}: its card {card.name} has no model parameters ({exc})") from None
         if meta.get("method", self.spec.method).replace("-spike", "") != self.spec.method.replace("-spike", ""):
-            raise InputError(f"teacher {path}: a {meta.get('method')!r} network; the student is {self.spec.method!r}")
-        if self.fusion and params.get("spike_only", True):
-            raise InputError(f"teacher {path}: a spike-only network cannot teach the fusion network's fusion steps "
+            raise InputError(f"{role} {path}: a {meta.get('method')!r} network; the student is {self.spec.method!r}")
+        if spike_only and not params.get("spike_only", False):
+            raise InputError(f"{role} {path}: a fusion network; the floor is a spike-only network's image "
+                             "(give a spike-only network's weights, such as neuspike-net-spike's)")
+        if not spike_only and self.fusion and params.get("spike_only", True):
+            raise InputError(f"{role} {path}: a spike-only network cannot teach the fusion network's fusion steps "
                              "(give the full fusion network's weights)")
         from neuspike.methods import create
 

@@ -83,3 +83,50 @@ def test_a_spike_only_teacher_cannot_teach_a_fusion_student(tmp_path, teacher, o
     assert spike.is_file()
     with pytest.raises(InputError, match="spike-only network cannot teach"):
         Trainer(tiny_spec(tmp_path, shard_dir=shard, teacher=str(spike), distill_weight=1.0), quiet=True)
+
+
+def test_the_spike_floor_against_a_held_spike_only_network(tmp_path, teacher, one_torch_thread):
+    """losses.spike_floor.network: the floor is a trained spike-only network's image (held, no gradient), so
+    the term is mean(relu(l_fusion - l_floor)) with l_floor that network's crop losses (computed by hand here);
+    the teacher's own spike-only export is its fusion file's spike-only self, so from the teacher's weights the
+    held floor gives the term the network's own floor gives. A fusion file as the floor, a file that is not a
+    .safetensors and a missing file are refused by name."""
+    weights, shard = teacher
+    spike = weights.with_name("neuspike-net-spike.safetensors")
+    with pytest.raises(InputError, match="spike_floor.network: expected a spike-only"):
+        tiny_spec(tmp_path, losses={"spike_floor": {"weight": 1.0, "network": "floor.pt"}})
+    with pytest.raises(InputError, match="spike_floor.network .*a fusion network"):
+        Trainer(tiny_spec(tmp_path, shard_dir=shard, losses={"spike_floor": {"weight": 1.0, "network": str(weights)}}),
+                quiet=True)
+    with pytest.raises(InputError, match="no such file"):
+        Trainer(tiny_spec(tmp_path, shard_dir=shard,
+                          losses={"spike_floor": {"weight": 1.0, "network": str(tmp_path / "gone.safetensors")}}),
+                quiet=True)
+    runs = {}
+    for name, network in (("own", None), ("held", str(spike))):
+        floor = {"weight": 2.0} if network is None else {"weight": 2.0, "network": network}
+        run = Trainer(tiny_spec(tmp_path / name, shard_dir=shard, init_from=str(weights),
+                                losses={"l1": 1.0, "ssim": 1.0, "spike_floor": floor}), quiet=True)
+        run.task.prepare(run._bar)
+        runs[name] = run
+    held = runs["held"].task
+    assert held.floor_network is not None and not any(p.requires_grad for p in held.floor_network.parameters())
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # move the student away from the floor's weights: the two floors now differ
+        for p in runs["held"].module.parameters():
+            p.add_(0.05 * torch.randn(p.shape, generator=gen))
+    steps = [k for k in range(40) if held.step_variant(k) == "fusion"][:3]
+    with torch.no_grad():
+        for step in steps:
+            inputs, target = held.batch(step)
+            floor = held.floor_network(inputs[0], *inputs[2:])
+            by_hand = (held.crop_losses(held.forward(inputs, "fusion"), target)
+                       - held.crop_losses(floor, target)).clamp_min(0).mean()
+            _, parts = held.step_loss(step, runs["held"].autocast)
+            assert parts["spike_floor"] == pytest.approx(float(by_hand), rel=1e-5, abs=1e-7)
+            own_floor = held.forward(inputs, "spike")
+            assert not torch.allclose(own_floor, floor, atol=1e-4)  # (the held floor is not the moving self)
+        own, ref = runs["own"].task, runs["held"].task
+        for step in steps:  # unmoved student: its own floor is the held export's image
+            inputs, _ = own.batch(step)
+            assert torch.allclose(own.forward(inputs, "spike"), ref.floor_network(inputs[0], *inputs[2:]), atol=1e-5)
