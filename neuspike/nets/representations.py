@@ -45,7 +45,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 __all__ = ["CHANNELS", "EVENT_REPRESENTATIONS", "KEY_CHANNELS", "KEY_ESTIMATES", "KEY_SIDE",
            "SPIKE_REPRESENTATIONS", "as_u8", "event_representation", "key_intervals", "key_representation",
-           "spike_gain", "spike_quantum", "spike_representation", "span_rate"]
+           "spike_gain", "spike_quantum", "spike_representation"]
 
 #: Channels of either representation (the supplement's 32).
 CHANNELS = 32
@@ -60,7 +60,7 @@ BAND_ROWS = 8
 #: Intervals on each side of the one that holds the key instant (``2 * KEY_SIDE + 1`` channels).
 KEY_SIDE = 2
 #: Extra spike estimates at the key instant (:func:`key_representation`) and the channels each adds.
-KEY_CHANNELS = {"none": 0, "isi-sequence": 2 * KEY_SIDE + 1, "isi-span": 2 * KEY_SIDE + 2}
+KEY_CHANNELS = {"none": 0, "isi-sequence": 2 * KEY_SIDE + 1}
 KEY_ESTIMATES = tuple(KEY_CHANNELS)
 
 
@@ -253,32 +253,13 @@ def key_intervals(planes: np.ndarray, centre: int, side: int = KEY_SIDE) -> np.n
     return out
 
 
-def span_rate(planes: np.ndarray) -> np.ndarray:
-    """The mean spike rate between each pixel's first and last spike of the window: ``(n - 1) / (t_n - t_1)``
-    spikes per plane, float32 (H, W); a pixel with fewer than two spikes gets ``n / T`` (T planes).
-
-    Over a constant radiance an integrate-and-fire pixel's spikes are evenly spaced whatever its initial
-    charge, so this is the rate to within one plane over the whole span: the estimate a still pixel
-    affords, where a single interval (a few planes long in dim light) is known to a plane in a few.
-    """
-    t = planes.shape[0]
-    u8 = as_u8(planes)
-    n = u8.sum(axis=0, dtype=np.int32)
-    first = np.argmax(u8, axis=0)
-    last = t - 1 - np.argmax(u8[::-1], axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        span = (n - 1).astype(np.float32) / (last - first).astype(np.float32)
-    return np.where(n >= 2, span, n.astype(np.float32) / np.float32(t)).astype(np.float32)
-
-
 def key_representation(sample: Sample, kind: str, *, backend: str = "auto") -> np.ndarray | None:
-    """The extra spike estimates at the key instant in radiance units: float32 (2 * KEY_SIDE + 1, H, W) for
-    ``"isi-sequence"`` (:func:`key_intervals` at the window's centre, divided by the gain); for
-    ``"isi-span"`` those and, last, the window's span rate (:func:`span_rate`, divided by the gain);
-    None for ``"none"``."""
+    """The extra spike estimates at the key instant: float32 (2 * KEY_SIDE + 1, H, W) in radiance units
+    for ``"isi-sequence"`` (:func:`key_intervals` at the window's centre, divided by the gain), None for
+    ``"none"``."""
     if kind == "none":
         return None
-    if kind not in KEY_CHANNELS:
+    if kind != "isi-sequence":
         raise InputError(f"key estimates: expected one of {KEY_ESTIMATES}, got {kind!r}")
     planes = _planes(sample)
     gain, _ = spike_gain(sample)
@@ -288,11 +269,8 @@ def key_representation(sample: Sample, kind: str, *, backend: str = "auto") -> n
         out = np.empty((2 * KEY_SIDE + 1, *planes.shape[1:]), np.float32)
         with KERNEL_LOCK:
             _kernels.key_window(np.ascontiguousarray(u8), centre, np.float32(gain), out)
-    else:
-        out = key_intervals(planes, centre) / np.float32(gain)
-    if kind == "isi-span":
-        out = np.concatenate([out, (span_rate(planes) / np.float32(gain))[None]])
-    return out
+        return out
+    return key_intervals(planes, centre) / np.float32(gain)
 
 
 def event_representation(sample: Sample, kind: str, *, event_threshold: float | None = None,

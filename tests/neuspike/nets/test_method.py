@@ -299,39 +299,6 @@ def test_key_intervals_match_a_brute_force_search_and_the_interval_at_the_centre
     assert np.array_equal(out, ref / np.float32(0.3))
 
 
-def test_span_rate_is_the_period_of_an_evenly_spaced_train_whatever_its_phase(rng):
-    """An integrate-and-fire pixel under a constant radiance fires every ``period`` planes from a phase set
-    by its initial charge: ``(n - 1) / (t_n - t_1)`` is ``1 / period`` exactly at every phase, where the
-    count over the window (``n / T``) is off by up to one spike; a pixel with one spike or none gets ``n / T``.
-    ``"isi-span"`` is the five interval estimates and the span rate last, in radiance units."""
-    from neuspike.nets.representations import key_intervals, key_representation, span_rate
-
-    t, periods = 256, np.array([3, 7, 10, 37, 100])
-    planes = np.zeros((t, 2, len(periods)), bool)
-    for j, period in enumerate(periods):
-        phase = int(rng.integers(period))
-        planes[phase::period, 0, j] = True
-    planes[:, 1, :] = False
-    planes[200, 1, 1] = True  # one spike: n / T
-    rate = span_rate(planes)
-    assert rate.dtype == np.float32 and rate.shape == (2, len(periods))
-    np.testing.assert_allclose(rate[0], 1.0 / periods, rtol=1e-6)
-    counted = planes[:, 0].sum(axis=0) / t
-    assert np.abs(counted - 1.0 / periods).max() > 1e-3  # (the count is not exact: the span is)
-    np.testing.assert_array_equal(rate[1], [0.0, 1.0 / t, 0.0, 0.0, 0.0])
-    sample = make_sample(gain=0.5, period=4)
-    key = key_representation(sample, "isi-span")
-    assert key.shape == (6, H, W)
-    assert np.array_equal(key[:5], key_representation(sample, "isi-sequence"))
-    assert np.allclose(key[5], 0.25 / 0.5)
-    assert np.array_equal(key_representation(sample, "isi-span", backend="numpy"), key)
-    assert np.allclose(key_intervals(sample.spikes.planes, T // 2) / 0.5, key[:5])
-    design = {**DEFAULT_DESIGN, "spike_only": True, "head": "support-count"}
-    method = NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **{**design, "key_estimates": "isi-span"})
-    assert method.encode(sample)[0][0].shape == (1, 38, H, W)
-    assert method.module.key_refine.out.out_channels == 6
-
-
 def test_key_estimates_of_a_regular_train_are_its_radiance_and_extend_the_spike_input():
     """Every interval of a regular train is its period: the five channels are (1 / period) / gain,
     appended after the 32 by ``encode``; bad names are refused, and weights trained with them are
