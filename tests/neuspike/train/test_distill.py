@@ -74,6 +74,7 @@ def test_a_compact_student_trains_from_a_full_teacher_and_logs_the_term(tmp_path
     assert len(rows) == 4 and all(float(r["distill"]) > 0 for r in rows)
     card = json.loads((tmp_path / "run" / "neuspike-net.json").read_text())
     assert card["model"]["params"]["width"] == LITE_DESIGN["width"]
+    assert "despeckle" not in card["model"]["params"]  # the read-out is the registry entry's, not the design
     assert card["training"]["spec"]["data"]["losses"]["distill"] == {"weight": 1.0, "teacher": str(weights)}
 
 
