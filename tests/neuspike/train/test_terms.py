@@ -18,7 +18,7 @@ def test_a_spec_names_its_terms_with_their_parameters_and_defaults():
     assert WindowData().losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None}}
     got = resolve_losses({"spike_floor": 2, "l1": 1, "offset": {"weight": 0.5}})
     assert list(got) == ["l1", "offset", "spike_floor"]  # the registry's order, whatever the spec's
-    assert got["spike_floor"] == {"weight": 2.0, "noise_weights": None, "terms": "both"}
+    assert got["spike_floor"] == {"weight": 2.0, "noise_weights": None, "terms": "both", "network": None}
     assert resolve_losses({"offset": 0}) == {}  # weight 0 with its defaults: as if not named
     with pytest.raises(InputError, match=r"unknown terms \['wobble'\]; the registered ones: l1, ssim"):
         resolve_losses({"wobble": 1})
@@ -33,7 +33,7 @@ def test_set_reaches_a_term_and_its_parameters():
                                         'data.losses.spike_floor={"weight": 2, "noise_weights": {"high": 16}}'])
     assert spec.data.losses["offset"] == {"weight": 0.5}
     assert spec.data.losses["ssim"] == {"weight": 1.0, "window": 7, "noise_weights": None}
-    assert spec.data.losses["spike_floor"] == {"weight": 2.0, "noise_weights": {"high": 16.0}, "terms": "both"}
+    assert spec.data.losses["spike_floor"] == {"weight": 2.0, "noise_weights": {"high": 16.0}, "terms": "both", "network": None}
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
 
 
@@ -47,7 +47,7 @@ def test_the_earlier_fields_read_into_the_terms_and_every_shipped_spec_loads():
     losses = spec_from_dict(earlier).data.losses
     assert losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None},
                       "distill": {"weight": 1.0, "teacher": "neuspike/trained/neuspike-net.safetensors"},
-                      "spike_floor": {"weight": 2.0, "noise_weights": {"medium": 8.0, "high": 16.0}, "terms": "both"}}
+                      "spike_floor": {"weight": 2.0, "noise_weights": {"medium": 8.0, "high": 16.0}, "terms": "both", "network": None}}
     cards = sorted(PACKAGE_WEIGHTS.glob("*.json"))
     assert cards
     for card in cards:  # the spec behind every shipped network still reads (and round-trips)
@@ -108,8 +108,9 @@ def test_sequence_specs_name_their_own_terms_and_read_the_earlier_fields():
 
 def test_the_earlier_data_fields_read_into_the_data_terms_with_the_same_shard_keys():
     """The shipped cards' specs name sweep_fraction, sweep_grid, sweep_scenes, sweep_scene_weights and
-    broad_fraction: they read into the sweep and broad data terms, and the shard key is the one those
-    fields made (their names and values, reconstructed here from the card itself)."""
+    broad_fraction (or, written by this trainer, the mixture's terms): they read into the sweep and broad data
+    terms, and the shard key is the one those fields made (their names and values, reconstructed here from the
+    card itself)."""
     from neuspike.train.mixture import DATA_TERMS, resolve_mixture
 
     assert list(DATA_TERMS) == ["sweep", "broad", "fast_pans"]
@@ -117,6 +118,11 @@ def test_the_earlier_data_fields_read_into_the_data_terms_with_the_same_shard_ke
     assert cards
     for card in cards:
         written = json.loads(card.read_text())["training"]["spec"]["data"]
+        if "mixture" in written:  # the current form: the earlier fields' values, read back from the terms
+            terms = written["mixture"]
+            written = {"sweep_fraction": terms["sweep"]["fraction"], "sweep_scenes": terms["sweep"]["scenes"],
+                       "sweep_scene_weights": terms["sweep"]["scene_weights"], "sweep_grid": terms["sweep"]["grid"],
+                       "broad_fraction": terms.get("broad", {}).get("fraction", 0.0)}
         data = spec_from_dict(json.loads(card.read_text())["training"]["spec"]).data
         key = data.key(0)
         sweep = data.mixture["sweep"]
