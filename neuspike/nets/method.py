@@ -30,7 +30,7 @@ from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESEN
 from neuspike.sample import Sample
 from neuspike.methods.weights import read_card
 from neuspike.methods.counting import initial_state, level_shift
-from neuspike.methods.normalisation import DARK_ESTIMATED, dark_level
+from neuspike.methods.normalisation import DARK_ESTIMATED, dark_level, spike_counts
 from neuspike.nets.sliding import SlidingRepresentation
 
 __all__ = ["ARCHITECTURE_PARAMS", "CARD_DEFAULTS", "LEVELS", "NeuSpikeNetMethod", "count_level"]
@@ -289,7 +289,7 @@ class NeuSpikeNetMethod(LearnedMethod):
         spikes = sample.spikes
         if self.params.get("level", "counts") != "counts" or spikes is None or spike_gain(sample)[1] != "known":
             return image
-        counts = np.count_nonzero(spikes.planes, axis=0)  # one pass, shared with the dark estimate
+        counts = spike_counts(spikes.planes)  # one pass, shared with the dark estimate
         dark_rate, self._dark_how = dark_level(spikes, counts)
         shift = level_shift(image, counts, planes=spikes.num_planes, gain=float(spikes.gain), dark_rate=dark_rate,
                             state=initial_state(spikes))

@@ -138,3 +138,17 @@ def test_a_simulated_window_records_its_dark_rate_and_files_carry_it(tmp_path):
     from neuspike.methods.counting import initial_state
 
     assert initial_state(sample.spikes) == "normal"
+
+
+def test_spike_counts_are_count_nonzero_for_every_plane_dtype(rng):
+    """spike_counts (the byte sum the counted level and the dark estimate share) is np.count_nonzero over the
+    planes for bool planes, 0/1 bytes, other byte values and wider integers, and keeps its counts past 255."""
+    from neuspike.methods.normalisation import spike_counts
+
+    planes = rng.random((300, 5, 7)) < 0.4
+    planes[:, 0, 0] = True  # 300 spikes: past a byte
+    want = np.count_nonzero(planes, axis=0)
+    for given in (planes, planes.view(np.uint8), planes.astype(np.uint8) * 3, planes.astype(np.int32)):
+        got = spike_counts(given)
+        assert got.shape == (5, 7) and np.array_equal(got, want), given.dtype
+    assert int(spike_counts(planes)[0, 0]) == 300
