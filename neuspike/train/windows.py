@@ -377,11 +377,11 @@ class WindowTask:
         self.needs_convex = any(term.needs_convex for term, _ in self.terms)
 
     def load_teacher(self, path: str, role: str = "teacher", *, spike_only: bool = False) -> torch.nn.Module:
-        """A trained network's module (the ``distill`` term's ``teacher``; with ``role="floor"`` the
-        ``spike_floor`` term's spike-only ``network``): created untrained from its JSON card's parameters,
-        the file loaded by the same loader as every learned method's, held in eval mode without gradient.
-        ``spike_only``: the file must hold a spike-only network (else it must hold one that answers in
-        every variant this run trains)."""
+        """A trained network's module (the ``distill`` term's ``teacher``, or the ``spike_floor`` term's spike-only
+        ``network``): created untrained from its JSON card's parameters, the file loaded by the same loader as
+        every learned method's, held in eval mode without gradient. ``role`` names the file in errors;
+        ``spike_only``: the file must hold a spike-only network (else one that answers in every variant this
+        run trains)."""
 
         weights, card = Path(path), Path(path).with_suffix(".json")
         if not weights.is_file():
