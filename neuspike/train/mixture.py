@@ -171,6 +171,25 @@ register_data_term(DataTerm(
     "broad", key=lambda params: {"broad_fraction": params["fraction"]},
     doc="a share of the picture cells whose picture is a broad-leaves image (a still dead-leaves scene whose "
         "smallest leaf is 5-15 % of the view's side) in place of a training photograph's region"))
+def _check_smooth(params: dict[str, Any]) -> dict[str, Any]:
+    sigma = params["sigma"]
+    if isinstance(sigma, (str, bytes)) or not hasattr(sigma, "__len__") or len(sigma) != 2 or not all(
+            not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in sigma) \
+            or not sigma[0] <= sigma[1]:
+        raise InputError(f"mixture.smooth.sigma: expected [low, high] blur widths > 0 in pixels of a 400-pixel-wide "
+                         f"view, low <= high, got {sigma!r}")
+    return {**params, "sigma": (float(sigma[0]), float(sigma[1]))}
+
+
+register_data_term(DataTerm(
+    "smooth", defaults={"sigma": (4.0, 24.0)}, check=_check_smooth,
+    key=lambda params: {"smooth": [params["fraction"], list(params["sigma"])]},
+    doc="a share of the photograph cells whose picture is smooth around a sharp object: the region blurred by a "
+        "Gaussian of a width drawn log-uniformly in sigma (pixels of a 400-pixel-wide view) outside an ellipse "
+        "covering 10-40 % of the view, where the photograph stays sharp (a clock on a wall, a car under a sky): "
+        "flat and slowly varying regions beside texture, which the training photographs rarely hold"))
+
+
 def _check_fast(params: dict[str, Any]) -> dict[str, Any]:
     speeds = params["speeds"]
     if isinstance(speeds, (str, bytes)) or not hasattr(speeds, "__len__") or not speeds or not all(

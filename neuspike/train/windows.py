@@ -102,6 +102,39 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
     return str(path)
 
 
+def _smooth_source(spec: TrainSpec, photo: str, split: str, index: int, size: tuple[int, int]) -> str:
+    """With the ``smooth`` data term: for its share of the photograph cells, the region ``photo`` blurred outside
+    an ellipse where it stays sharp (the term's doc), saved beside it, from a stream of its own; ``photo``
+    itself for the other cells."""
+    smooth = spec.data.mixture.get("smooth")
+    if smooth is None:
+        return photo
+    rng = derive_rng(spec.seed, "smooth-picture", split, int(index))
+    if not rng.random() < smooth["fraction"]:
+        return photo
+    lo, hi = smooth["sigma"]
+    sigma = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * size[0] / SENSOR_SIZE[0]
+    area = float(rng.uniform(0.1, 0.4))
+    aspect = float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+    cx, cy = float(rng.uniform(0.25, 0.75) * size[0]), float(rng.uniform(0.25, 0.75) * size[1])
+    path = Path(photo).with_name(f"{Path(photo).stem}-smooth-{index:06d}.npy")
+    if not path.exists():
+        region = np.load(photo)
+        h, w = region.shape
+        rx = np.sqrt(area * w * h / np.pi * aspect)
+        ry = area * w * h / np.pi / rx
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+        inside = (((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 <= 1.0).astype(np.float32)
+        edge = max(1.0, 0.02 * w)  # a soft rim, as an object's edge is not one pixel wide
+        mask = cv2.GaussianBlur(inside, (0, 0), edge)
+        blurred = cv2.GaussianBlur(region, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+        picture = np.clip(mask * region + (1.0 - mask) * blurred, 0.0, 1.0).astype(np.float32)
+        buf = io.BytesIO()
+        np.save(buf, picture)
+        write_bytes(path, buf.getvalue())
+    return str(path)
+
+
 def _broad_source(spec: TrainSpec, source_dir: Path, split: str, index: int, size: tuple[int, int]) -> str | None:
     """With the ``broad`` data term: for its share of the cells, a broad-leaves picture of ``size`` saved
     under ``source_dir`` (the first frame of a still ``dead_leaves`` scene, smallest leaf 5-15 % of the
@@ -173,7 +206,7 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
         broad = _broad_source(spec, Path(source_dir), split, index, size)
         # the photograph's draws are made either way, so the cell's later draws do not depend on the picture
         photo = _photo_source(spec, rng, Path(source_dir), split, index, size, relative_scale, save=broad is None)
-        image = broad or photo
+        image = broad or _smooth_source(spec, photo, split, index, size)
         focus = (float(rng.uniform(0.2, 0.8) * size[0]), float(rng.uniform(0.2, 0.8) * size[1]))
         if kind == "pan":
             scene = SceneSpec(kind="pan", image=image, size=size, velocity_px_s=velocity)
@@ -208,6 +241,8 @@ def draw_cell(spec: TrainSpec, split: str, index: int, source_dir: str | os.Path
             "image": Path(scene.image).name if kind != "dead_leaves" else None}
     if "broad" in data.mixture:  # (the descriptions of earlier specs' cells stay as they were)
         info["broad"] = kind != "dead_leaves" and "-broad-" in Path(scene.image).name
+    if "smooth" in data.mixture:  # (likewise)
+        info["smooth"] = kind != "dead_leaves" and "-smooth-" in Path(scene.image).name
     if fast is not None:  # (likewise)
         info["fast_pan"] = at_fast
     if sweep is not None:  # (the descriptions of earlier specs' cells stay as they were)

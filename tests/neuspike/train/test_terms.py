@@ -113,7 +113,7 @@ def test_the_earlier_data_fields_read_into_the_data_terms_with_the_same_shard_ke
     card itself)."""
     from neuspike.train.mixture import DATA_TERMS, resolve_mixture
 
-    assert list(DATA_TERMS) == ["sweep", "broad", "fast_pans"]
+    assert list(DATA_TERMS) == ["sweep", "broad", "smooth", "fast_pans"]
     cards = sorted(PACKAGE_WEIGHTS.glob("neuspike-net*.json"))
     assert cards
     for card in cards:

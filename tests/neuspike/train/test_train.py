@@ -177,6 +177,51 @@ def test_sweep_scenes_give_the_sweep_cells_the_sweeps_own_scenes_and_leave_the_r
         WindowData(mixture={"sweep": {"fraction": 0.5, "scenes": "yes"}})
 
 
+def test_the_smooth_term_blurs_a_share_of_the_photographs_outside_a_sharp_ellipse(tmp_path):
+    """mixture.smooth p: about p of the photograph cells take their region blurred outside an ellipse, every other
+    draw (kind, scene, condition, simulation seed) that of the same spec without it. The saved picture keeps the
+    photograph at the ellipse's centre and is smoother than it far outside (its gradient energy there falls),
+    its mean level kept; the same seed saves the same picture; the shard key names the term only when set; bad
+    widths are refused by name."""
+    import dataclasses
+    from pathlib import Path
+
+    base = tiny_spec(tmp_path / "base", view=64)
+    spec = tiny_spec(tmp_path / "smooth", view=64, mixture={"smooth": {"fraction": 0.5, "sigma": [16, 32]}})
+    smooth = pictures = 0
+    for i in range(60):
+        before, after = draw_cell(base, "train", i, tmp_path / "a"), draw_cell(spec, "train", i, tmp_path / "b")
+        assert after[1:3] == before[1:3]
+        assert dataclasses.replace(after[0], image=before[0].image) == before[0]
+        if before[0].kind == "dead_leaves":
+            assert after[3]["smooth"] is False
+            continue
+        pictures += 1
+        if not after[3]["smooth"]:
+            np.testing.assert_array_equal(np.load(after[0].image), np.load(before[0].image))
+            continue
+        smooth += 1
+        photo, picture = np.load(before[0].image), np.load(after[0].image)
+        assert Path(after[0].image).name.endswith(f"-smooth-{i:06d}.npy") and picture.dtype == np.float32
+        assert abs(float(picture.mean()) - float(photo.mean())) < 0.02
+        again = draw_cell(spec, "train", i, tmp_path / "c")[0]
+        np.testing.assert_array_equal(np.load(again.image), picture)
+
+        def roughness(x):
+            return float(np.abs(np.diff(x, axis=0)).mean() + np.abs(np.diff(x, axis=1)).mean())
+
+        gap = np.abs(picture - photo)
+        corners = np.concatenate([gap[:6, :6].ravel(), gap[:6, -6:].ravel(), gap[-6:, :6].ravel(), gap[-6:, -6:].ravel()])
+        if roughness(photo) > 0.01:
+            assert roughness(picture) < roughness(photo)
+        assert float(gap.min()) < 1e-3 or float(corners.max()) == 0.0  # sharp somewhere: the ellipse
+    assert pictures > 20 and 0.2 < smooth / pictures < 0.8
+    assert spec.data.key(0)["smooth"] == [0.5, [16.0, 32.0]] and "smooth" not in base.data.key(0)
+    for bad in ([0, 4], [8, 4], [4], "wide", [4, float("inf")]):
+        with pytest.raises(InputError, match="mixture.smooth.sigma"):
+            WindowData(mixture={"smooth": {"fraction": 0.5, "sigma": bad}})
+
+
 def test_broad_fraction_swaps_only_the_picture_for_a_broad_leaves_one(tmp_path):
     """broad_fraction p: about p of the picture cells take a broad-leaves picture (the saved file is the
     first frame of the still dead-leaves scene named by its seed, rendered again here), with every other
