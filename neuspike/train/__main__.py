@@ -60,8 +60,8 @@ The loss of single windows is a sum of registered terms, each with its parameter
 are set with --set data.losses.TERM=WEIGHT or --set 'data.losses.TERM={...}' (neuspike/train/terms.py
 lists each term's parameters). The data's draw takes registered data terms likewise (the data
 section's "mixture"; by default none): for single windows sweep (a share of the windows at the
-sweeps' points, optionally with the sweeps' own scenes), broad (a share of broad-leaves pictures) and
-fast_pans (a share of pans at 2-16x the sweeps' speed),
+sweeps' points, optionally with the sweeps' own scenes), broad (a share of broad-leaves pictures),
+smooth (a share of photographs blurred outside a sharp ellipse) and fast_pans (a share of pans at 2-16x the sweeps' speed),
 for sequences partial_first (a share of runs whose first window is cut short), set with
 --set data.mixture.TERM=FRACTION or --set 'data.mixture.TERM={...}' (neuspike/train/mixture.py)."""
 

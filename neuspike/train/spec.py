@@ -165,7 +165,8 @@ class WindowData:
         cells at the sweeps' points, ``grid`` ``"sweeps"`` (the three sweeps' 12, :data:`SWEEP_POINTS`) or
         ``"light-noise"`` (with the light x noise report's, :data:`LIGHT_NOISE_POINTS`: 24), panning at the
         sweeps' 1000 px/s, with ``scenes`` the sweeps' own four scenes in shares ``scene_weights``) and
-        ``broad`` (a share of the picture cells with a broad-leaves picture) and ``fast_pans`` (a share of
+        ``broad`` (a share of the picture cells with a broad-leaves picture), ``smooth`` (a share of the
+        photographs blurred outside a sharp ellipse) and ``fast_pans`` (a share of
         pans at multiples of the sweeps' speed at S = 256, the fast-motion reports'); a bare number is the
         fraction. Default: none (the base draw alone, as every spec before the terms). The earlier fields
         (``sweep_fraction``, ``sweep_grid``, ``sweep_scenes``, ``sweep_scene_weights``, ``broad_fraction``)
