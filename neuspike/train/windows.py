@@ -96,22 +96,36 @@ def _photo_source(spec: TrainSpec, rng: np.random.Generator, source_dir: Path, s
     region = np.clip(cv2.resize(region, (vw, vh), interpolation=interp), 0.0, 1.0).astype(np.float32)
     path = source_dir / f"{split}-{index:06d}-{name}.npy"
     if not path.exists():
-        buf = io.BytesIO()
-        np.save(buf, region)
-        write_bytes(path, buf.getvalue())
+        _save_picture(path, region)
     return str(path)
+
+
+def _save_picture(path: Path, picture: np.ndarray) -> None:
+    """Write a cell's picture (float32 (H, W)) as a .npy file, whole or not at all."""
+    buf = io.BytesIO()
+    np.save(buf, picture)
+    write_bytes(path, buf.getvalue())
+
+
+def _picture_term(spec: TrainSpec, term: str, split: str, index: int
+                  ) -> tuple[dict[str, Any], np.random.Generator] | None:
+    """``(the term's parameters, its stream for the cell)`` where the picture data term ``term`` takes cell
+    ``index`` of ``split`` (its share, drawn first from a stream of its own, ``<term>-picture``), else None."""
+    params = spec.data.mixture.get(term)
+    if params is None:
+        return None
+    rng = derive_rng(spec.seed, f"{term}-picture", split, int(index))
+    return (params, rng) if rng.random() < params["fraction"] else None
 
 
 def _smooth_source(spec: TrainSpec, photo: str, split: str, index: int, size: tuple[int, int]) -> str:
     """With the ``smooth`` data term: for its share of the photograph cells, the region ``photo`` blurred outside
     an ellipse where it stays sharp (the term's doc), saved beside it, from a stream of its own; ``photo``
     itself for the other cells."""
-    smooth = spec.data.mixture.get("smooth")
-    if smooth is None:
+    drawn = _picture_term(spec, "smooth", split, index)
+    if drawn is None:
         return photo
-    rng = derive_rng(spec.seed, "smooth-picture", split, int(index))
-    if not rng.random() < smooth["fraction"]:
-        return photo
+    smooth, rng = drawn
     lo, hi = smooth["sigma"]
     sigma = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * size[0] / SENSOR_SIZE[0]
     area = float(rng.uniform(0.1, 0.4))
@@ -129,9 +143,7 @@ def _smooth_source(spec: TrainSpec, photo: str, split: str, index: int, size: tu
         mask = cv2.GaussianBlur(inside, (0, 0), edge)
         blurred = cv2.GaussianBlur(region, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
         picture = np.clip(mask * region + (1.0 - mask) * blurred, 0.0, 1.0).astype(np.float32)
-        buf = io.BytesIO()
-        np.save(buf, picture)
-        write_bytes(path, buf.getvalue())
+        _save_picture(path, picture)
     return str(path)
 
 
@@ -139,12 +151,10 @@ def _broad_source(spec: TrainSpec, source_dir: Path, split: str, index: int, siz
     """With the ``broad`` data term: for its share of the cells, a broad-leaves picture of ``size`` saved
     under ``source_dir`` (the first frame of a still ``dead_leaves`` scene, smallest leaf 5-15 % of the
     side), from a stream of its own; None for the other cells."""
-    broad = spec.data.mixture.get("broad")
-    if broad is None:
+    drawn = _picture_term(spec, "broad", split, index)
+    if drawn is None:
         return None
-    rng = derive_rng(spec.seed, "broad-picture", split, int(index))
-    if not rng.random() < broad["fraction"]:
-        return None
+    _, rng = drawn
     radius, seed = float(rng.uniform(0.05, 0.15)), int(rng.integers(2**31))
     path = source_dir / f"{split}-{index:06d}-broad-{seed}.npy"
     if not path.exists():
@@ -153,9 +163,7 @@ def _broad_source(spec: TrainSpec, source_dir: Path, split: str, index: int, siz
         scene = make_scene(SceneSpec("dead_leaves", size=size, velocity_px_s=(0.0, 0.0), seed=seed,
                                      leaf_min_radius=radius))
         picture = np.clip(scene.render(np.array([0.0]))[0], 0.0, 1.0).astype(np.float32)
-        buf = io.BytesIO()
-        np.save(buf, picture)
-        write_bytes(path, buf.getvalue())
+        _save_picture(path, picture)
     return str(path)
 
 
