@@ -22,7 +22,7 @@ from torch import nn
 
 from neuspike.errors import FormatError, InputError
 from neuspike.methods.learned import LearnedMethod
-from neuspike.methods.readout import despeckle
+from neuspike.methods.readout import despeckle, wiener
 from neuspike.nets.fusion import FUSIONS
 from neuspike.nets.network import HEADS, KEY_ESTIMATES, MOTION_GATES, SUPPORT_CUES, TRANSFORMERS, NeuSpikeNet
 from neuspike.nets.representations import (EVENT_REPRESENTATIONS, SPIKE_REPRESENTATIONS, event_representation,
@@ -168,6 +168,11 @@ class NeuSpikeNetMethod(LearnedMethod):
         beyond all eight neighbours' range by more than it, are replaced by their 3x3 median after the
         level (:func:`neuspike.methods.readout.despeckle`). The registered networks use
         :data:`neuspike.nets.DESPECKLE`. Kept out of ``params`` when off.
+    wiener : float
+        0 (off, the default of the class) or the noise variance's multiple of the image's flattest
+        neighbourhoods' variance: after despeckling, the local Wiener filter smooths the image where it
+        varies no more than that (:func:`neuspike.methods.readout.wiener`). The registered networks use
+        :data:`neuspike.nets.WIENER`. Kept out of ``params`` when off.
     level : str
         ``"counts"`` (default): where the sensor's gain is known, the image is shifted so that the
         spikes it predicts, pixel by pixel under the sensor model of how the window began
@@ -187,7 +192,7 @@ class NeuSpikeNetMethod(LearnedMethod):
                  fusion: str, spike_only: bool, event_skip_weight: float = 1.0, head: str = "tanh",
                  motion_gate: str = "none", transformer: str = "fixed", support_cue: str = "none",
                  key_estimates: str = "none", level: str = "counts", width: float = 1.0, head_kernel: int = 3,
-                 despeckle: float = 0.0, **learned: Any) -> None:
+                 despeckle: float = 0.0, wiener: float = 0.0, **learned: Any) -> None:
         _check_params(dict(spike_representation=spike_representation, event_representation=event_representation,
                            fusion=fusion, spike_only=spike_only, head=head, motion_gate=motion_gate,
                            transformer=transformer, support_cue=support_cue, key_estimates=key_estimates))
@@ -202,6 +207,10 @@ class NeuSpikeNetMethod(LearnedMethod):
             raise InputError(f"despeckle: expected a margin in [0, 1) (0 = off), got {despeckle!r}")
         if despeckle:
             learned["despeckle"] = float(despeckle)
+        if isinstance(wiener, bool) or not isinstance(wiener, (int, float)) or not 0 <= wiener < 100:
+            raise InputError(f"wiener: expected a noise multiple in [0, 100) (0 = off), got {wiener!r}")
+        if wiener:
+            learned["wiener"] = float(wiener)
         super().__init__(name, spike_representation=spike_representation,
                          event_representation=event_representation, fusion=fusion, spike_only=spike_only,
                          event_skip_weight=float(event_skip_weight), head=head, motion_gate=motion_gate,
@@ -279,10 +288,13 @@ class NeuSpikeNetMethod(LearnedMethod):
         """The clamped output, shifted so that it predicts the window's spike count (``level="counts"``,
         where the gain is known): :func:`neuspike.methods.counting.level_shift` under the sensor model of
         how the window began; then, with ``despeckle``, its isolated outliers replaced by their 3x3 median
-        (:func:`neuspike.methods.readout.despeckle`)."""
+        (:func:`neuspike.methods.readout.despeckle`); then, with ``wiener``, smoothed where it varies no
+        more than its noise (:func:`neuspike.methods.readout.wiener`), clamped to [0, 1] again."""
         image = self._leveled(super().to_image(output, sample), sample)
         margin = self.params.get("despeckle", 0.0)
-        return despeckle(image, margin) if margin else image
+        image = despeckle(image, margin) if margin else image
+        scale = self.params.get("wiener", 0.0)
+        return np.clip(wiener(image, scale), 0.0, 1.0) if scale else image
 
     def _leveled(self, image: np.ndarray, sample: Sample) -> np.ndarray:
         self._level = None
@@ -305,6 +317,8 @@ class NeuSpikeNetMethod(LearnedMethod):
             label = f"{label}; gain estimated (99.5th-percentile rate = radiance 1)"
         if self.params.get("despeckle"):
             label = f"{label}; despeckled (margin {self.params['despeckle']:g})"
+        if self.params.get("wiener"):
+            label = f"{label}; Wiener-smoothed (noise {self.params['wiener']:g}x)"
         return image, label
 
     def load_weights(self, module: nn.Module, path: Path, *, may_lack: tuple[str, ...] = ()) -> str | None:

@@ -194,8 +194,8 @@ class Trainer:
 
     def export(self, variant: str, scores: dict[str, float], folders: list[Path]) -> None:
         name, state, params = self.task.exported(variant, self.spec.method)
-        # not the design: the file, the precision and the read-out (the registry entry sets the despeckling margin)
-        params = {k: v for k, v in params.items() if k not in ("weights_file", "precision", "despeckle")}
+        # not the design: the file, the precision and the read-out (the registry entry sets despeckling and smoothing)
+        params = {k: v for k, v in params.items() if k not in ("weights_file", "precision", "despeckle", "wiener")}
         card = ck.make_card(self.spec, name=name, model_class=type(self.method).__name__, params=params,
                             step=self.step, precision=self.precision, device=self.device, wall_s=self.wall_s,
                             scores=scores, data=self.task.describe_data())

@@ -96,3 +96,106 @@ def test_a_speck_left_beside_a_replaced_one_goes_in_a_further_pass():
     out = despeckle(image, 0.1)
     assert np.all(out == np.float32(0.4))
     assert image[3, 3] == np.float32(1.0)  # the caller's image is left as it was
+
+
+# -- the local Wiener filter ----------------------------------------------------------------------
+
+def _flat_with_noise(sigma: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    clean = np.full((60, 80), 0.3, np.float32)
+    noisy = clean + np.random.default_rng(seed).normal(0.0, sigma, clean.shape).astype(np.float32)
+    return clean, noisy
+
+
+def test_wiener_takes_white_noise_off_a_flat_image_by_about_the_box():
+    """On a flat image with white noise every neighbourhood varies as noise does, so each pixel takes its 5x5
+    mean: the error's standard deviation falls by about sqrt(25) = 5 (at least 3 here, leaving the rare
+    neighbourhoods whose sample variance exceeds twice the flattest tenth's)."""
+    from neuspike.methods.readout import wiener
+
+    clean, noisy = _flat_with_noise(0.03)
+    out = wiener(noisy, 2.0)
+    before, after = np.std(noisy - clean), np.std(out - clean)
+    assert after < before / 3
+    assert abs(float(out.mean()) - float(noisy.mean())) < 1e-3  # the level is kept
+
+
+def test_wiener_leaves_a_clean_piecewise_flat_image_as_it_was():
+    """A clean image with flat regions: the flattest tenth of its neighbourhoods does not vary at all, so the
+    noise estimate is zero and nothing is smoothed (the edges, where the variance is large, keep their values)."""
+    from neuspike.methods.readout import wiener
+
+    image = np.full((40, 60), 0.2, np.float32)
+    image[:, 30:] = 0.7
+    image[10:20, 5:15] = 0.9
+    assert np.array_equal(wiener(image, 2.0), image)
+
+
+def test_wiener_keeps_an_edge_far_above_the_noise():
+    """A step of 0.5 under noise of 0.02: the flat sides are smoothed, the step stays a step (the pixels beside
+    it keep their side's level within the noise)."""
+    from neuspike.methods.readout import wiener
+
+    rng = np.random.default_rng(3)
+    clean = np.full((50, 50), 0.2, np.float32)
+    clean[:, 25:] = 0.7
+    noisy = clean + rng.normal(0.0, 0.02, clean.shape).astype(np.float32)
+    out = wiener(noisy, 2.0)
+    assert np.all(np.abs(out[:, 24] - 0.2) < 0.08) and np.all(np.abs(out[:, 25] - 0.7) < 0.08)
+    assert np.std(out[:, :20] - clean[:, :20]) < np.std(noisy[:, :20] - clean[:, :20]) / 2
+
+
+def test_wiener_commutes_with_an_offset_and_a_gain():
+    """The local mean, the local variance and the noise estimate move together: filtering a * x + b gives a
+    times the filtered x plus b (the filter has no scale of its own)."""
+    from neuspike.methods.readout import wiener
+
+    _, noisy = _flat_with_noise(0.05, seed=1)
+    noisy[20:40, 30:60] += 0.3
+    base = wiener(noisy, 2.0).astype(np.float64)
+    moved = wiener((0.5 * noisy + 0.1).astype(np.float32), 2.0).astype(np.float64)
+    np.testing.assert_allclose(moved, 0.5 * base + 0.1, atol=2e-6)
+
+
+def test_wiener_refuses_what_it_cannot_filter():
+    from neuspike.methods.readout import wiener
+
+    image = np.zeros((8, 8), np.float32)
+    for bad in (0.0, -1.0, float("nan"), True):
+        with pytest.raises(InputError, match="scale"):
+            wiener(image, bad)
+    with pytest.raises(InputError, match="window"):
+        wiener(image, 2.0, window=4)
+    with pytest.raises(InputError, match="quantile"):
+        wiener(image, 2.0, quantile=100)
+    with pytest.raises(InputError, match="shape"):
+        wiener(np.zeros((2, 8, 8), np.float32), 2.0)
+    small = np.arange(12, dtype=np.float32).reshape(3, 4)
+    assert np.array_equal(wiener(small, 2.0), small)  # smaller than the box: left as it was
+    assert wiener(image, 2.0) is not image
+
+
+def test_the_registered_networks_smooth_their_read_out():
+    import torch
+
+    from neuspike.methods import entry
+    from neuspike.nets import WIENER
+    from neuspike.nets.method import NeuSpikeNetMethod
+    from neuspike.methods.readout import wiener
+    from neuspike.sample import Sample
+    from neuspike.streams import SpikeStream
+
+    for name in ("neuspike-net", "neuspike-net-spike"):
+        assert entry(name).params["wiener"] == WIENER
+    params = {**entry("neuspike-net-spike").params, "level": "network", "despeckle": 0.0}
+    method = NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **params)
+    _, noisy = _flat_with_noise(0.03, seed=2)
+    output = torch.from_numpy(noisy)[None, None]
+    spikes = SpikeStream(planes=np.zeros((4, *noisy.shape), bool), plane_rate_hz=20_000.0, start_s=0.0)
+    sample = Sample(height=noisy.shape[0], width=noisy.shape[1], key_time_s=1e-4, window_start_s=0.0,
+                    window_end_s=2e-4, spikes=spikes)
+    np.testing.assert_array_equal(method.to_image(output, sample), np.clip(wiener(noisy, WIENER), 0, 1))
+    with pytest.raises(InputError, match="wiener"):
+        NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **{**params, "wiener": -1.0})
+    off = NeuSpikeNetMethod("neuspike-net-spike", precision="float32", **{**params, "wiener": 0.0})
+    assert "wiener" not in off.params
+    np.testing.assert_array_equal(off.to_image(output, sample), np.clip(noisy, 0, 1))

@@ -129,7 +129,7 @@ def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_
         assert image.shape == (H, W) and image.dtype == np.float32
         assert 0.0 <= image.min() and image.max() <= 1.0
         assert method.last_normalisation == ("clamp; mean level counted from the spikes, dark rate estimated; "
-                                             "despeckled (margin 0.1)")
+                                             "despeckled (margin 0.1); Wiener-smoothed (noise 2x)")
     spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
     spike.reconstruct(make_sample(gain=None))
     assert "gain estimated" in spike.last_normalisation
@@ -157,9 +157,10 @@ def test_counts_level_shifts_the_image_until_it_predicts_the_spikes(weights_dir,
     radiance 64.5 / 128."""
     base = make_sample(gain=0.5, period=4)
     sample = Sample(**{**base.__dict__, "spikes": SpikeStream(base.spikes.planes, gain=0.5, dark_rate=0.0)})
-    # (the read-out's despeckling off: the level alone is under test)
-    network = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32", level="network", despeckle=0.0)
-    counts = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32", despeckle=0.0)
+    # (the read-out's despeckling and smoothing off: the level alone is under test)
+    off = dict(despeckle=0.0, wiener=0.0)
+    network = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32", level="network", **off)
+    counts = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32", **off)
     as_made, shifted = network.reconstruct(sample), counts.reconstruct(sample)
     assert 0 < as_made.min() and as_made.max() < 1 and 0 < shifted.min() and shifted.max() < 1  # nothing clipped
     assert float(shifted.mean(dtype=np.float64)) == pytest.approx(0.5, abs=1e-5)
