@@ -16,12 +16,17 @@ beyond all of its neighbours (two specks side by side).
 filter, a local Wiener filter): with the local mean ``m`` and variance ``v`` of the image over a
 ``window`` x ``window`` box and the noise variance ``s2``, each pixel becomes ``m + max(v - s2, 0) / v
 * (x - m)``. Where the neighbourhood varies no more than noise would, the pixel takes the local mean;
-where it varies much more (an edge, texture), it keeps its value. ``s2`` is estimated from the image:
-``scale`` times the ``quantile``-th percentile of the local variance over the image, the variance of
-its flattest neighbourhoods, which is the noise's where the image has flat regions and near zero in a
-clean one (where the filter leaves the image nearly as it was). A network trained for PSNR under
-sensor noise leaves grain of about that size on flat, dim regions, which costs SSIM most (on a flat
-truth SSIM's structure term is ``C2 / (var + C2)``, halved by a grain of 0.03 of the range).
+where it varies much more (an edge, texture), it keeps its value. ``s2`` is ``scale`` times the square
+of a noise level measured on the image itself: the 3x3 Laplacian mask ``[[1, -2, 1], [-2, 4, -2], [1,
+-2, 1]]`` cancels constants and ramps, its absolute response is averaged over 7x7 boxes, and the
+``quantile``-th percentile of those averages over the image, divided by ``6 sqrt(2 / pi)`` (the mean
+absolute response of the mask to white noise of unit deviation), is the deviation of the noise in the
+image's least-varying neighbourhoods. On a clean image with flat regions that is zero and the filter
+leaves the image as it was; over texture the least-varying neighbourhoods are still texture, so the
+percentile of a fine-scale measure (rather than of the local variance, which smooth shading fills)
+keeps the estimate low there. A network trained for PSNR under sensor noise leaves grain of a few
+hundredths of the range on flat, dim regions, which costs SSIM most (on a flat truth SSIM's structure
+term is ``C2 / (var + C2)``, halved by a grain of 0.03 of the range).
 """
 
 from __future__ import annotations
@@ -31,16 +36,21 @@ import numpy as np
 
 from neuspike.errors import InputError
 
-__all__ = ["WIENER_QUANTILE", "WIENER_WINDOW", "despeckle", "wiener"]
+__all__ = ["WIENER_QUANTILE", "WIENER_WINDOW", "despeckle", "noise_level", "wiener"]
 
 _RING = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.uint8)
 #: Passes at most: a pixel that stood beside a replaced one can be left beyond all its neighbours (a
 #: pair of specks), so the filter runs again until no outlier remains; on the validation windows of the
 #: training photographs one pass left 0.056 specks per mille, two 0.002, three none.
 MAX_PASSES = 4
-#: :func:`wiener`'s box (pixels a side) and the percentile of the local variance taken for the noise's.
-WIENER_WINDOW = 5
-WIENER_QUANTILE = 10.0
+#: :func:`wiener`'s box (pixels a side), and the percentile of the local mean absolute Laplacian taken for the
+#: noise level, averaged over boxes of ``_NOISE_BOX`` a side.
+WIENER_WINDOW = 7
+WIENER_QUANTILE = 5.0
+_NOISE_BOX = 7
+_LAPLACIAN = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float64)
+#: The mask's mean absolute response to white Gaussian noise of unit deviation: 6 sqrt(2 / pi).
+_LAPLACIAN_MEAN_ABS = 6.0 * np.sqrt(2.0 / np.pi)
 
 
 def despeckle(image: np.ndarray, margin: float) -> np.ndarray:
@@ -75,6 +85,27 @@ def despeckle(image: np.ndarray, margin: float) -> np.ndarray:
     return image
 
 
+def noise_level(image: np.ndarray, quantile: float = WIENER_QUANTILE) -> float:
+    """The deviation of white noise that the image's least-varying neighbourhoods hold (module docstring).
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+    quantile : float
+        Percentile, in (0, 100), of the 7x7 local means of the absolute Laplacian over the image.
+
+    Returns
+    -------
+    float >= 0, in the image's units: white noise of deviation s on a flat image reads about s at the median
+    and about 0.65 s at the 5th percentile (the boxes that happen to vary least); a clean image with flat
+    regions reads 0.
+    """
+    x = np.asarray(image, dtype=np.float64)
+    response = np.abs(cv2.filter2D(x, -1, _LAPLACIAN, borderType=cv2.BORDER_REFLECT))
+    local = cv2.blur(response, (_NOISE_BOX, _NOISE_BOX), borderType=cv2.BORDER_REFLECT)
+    return float(np.percentile(local, quantile)) / _LAPLACIAN_MEAN_ABS
+
+
 def wiener(image: np.ndarray, scale: float, *, window: int = WIENER_WINDOW,
            quantile: float = WIENER_QUANTILE) -> np.ndarray:
     """``image`` smoothed where it varies no more than its noise (the local Wiener filter; module docstring).
@@ -84,11 +115,11 @@ def wiener(image: np.ndarray, scale: float, *, window: int = WIENER_WINDOW,
     image : ndarray float32 (H, W)
         The image (any range: the filter commutes with adding a constant and with scaling).
     scale : float
-        The noise variance as a multiple of the ``quantile``-th percentile of the local variance, > 0.
+        The noise variance as a multiple of the square of :func:`noise_level`, > 0.
     window : int
         Side of the box of the local mean and variance, odd, >= 3.
     quantile : float
-        Percentile of the local variance over the image, in (0, 100).
+        :func:`noise_level`'s percentile, in (0, 100).
 
     Returns
     -------
@@ -106,12 +137,12 @@ def wiener(image: np.ndarray, scale: float, *, window: int = WIENER_WINDOW,
     if not (isinstance(quantile, (int, float)) and 0 < quantile < 100):
         raise InputError(f"wiener: quantile must lie in (0, 100), got {quantile!r}")
     x = image.astype(np.float64)
-    if min(x.shape) < window:
+    if min(x.shape) < max(window, _NOISE_BOX):
+        return x.astype(np.float32)
+    noise = scale * noise_level(x, quantile) ** 2
+    if noise <= 0.0:  # the least-varying neighbourhoods hold no noise: nothing to smooth
         return x.astype(np.float32)
     mean = cv2.blur(x, (window, window), borderType=cv2.BORDER_REFLECT)
     var = np.maximum(cv2.blur(x * x, (window, window), borderType=cv2.BORDER_REFLECT) - mean * mean, 0.0)
-    noise = scale * float(np.percentile(var, quantile))
-    if noise <= 0.0:  # no flat neighbourhood varies at all: nothing to tell from noise
-        return x.astype(np.float32)
     gain = np.maximum(var - noise, 0.0) / np.maximum(var, noise)
     return (mean + gain * (x - mean)).astype(np.float32)

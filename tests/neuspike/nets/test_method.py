@@ -129,7 +129,7 @@ def test_reconstruct_returns_an_image_of_the_sample_size(weights_dir, one_torch_
         assert image.shape == (H, W) and image.dtype == np.float32
         assert 0.0 <= image.min() and image.max() <= 1.0
         assert method.last_normalisation == ("clamp; mean level counted from the spikes, dark rate estimated; "
-                                             "despeckled (margin 0.1); Wiener-smoothed (noise 2x)")
+                                             "despeckled (margin 0.1); Wiener-smoothed (noise 5x)")
     spike = create("neuspike-net-spike", weights_dir=weights_dir, precision="float32")
     spike.reconstruct(make_sample(gain=None))
     assert "gain estimated" in spike.last_normalisation
