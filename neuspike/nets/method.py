@@ -169,9 +169,10 @@ class NeuSpikeNetMethod(LearnedMethod):
         level (:func:`neuspike.methods.readout.despeckle`). The registered networks use
         :data:`neuspike.nets.DESPECKLE`. Kept out of ``params`` when off.
     wiener : float
-        0 (off, the default of the class) or the noise variance's multiple of the image's flattest
-        neighbourhoods' variance: after despeckling, the local Wiener filter smooths the image where it
-        varies no more than that (:func:`neuspike.methods.readout.wiener`). The registered networks use
+        0 (off, the default of the class) or the noise variance as a multiple of the square of the noise
+        level of the image's least-varying neighbourhoods (:func:`neuspike.methods.readout.noise_level`):
+        after despeckling, the local Wiener filter smooths the image where it varies no more than that
+        (:func:`neuspike.methods.readout.wiener`). The registered networks use
         :data:`neuspike.nets.WIENER`. Kept out of ``params`` when off.
     level : str
         ``"counts"`` (default): where the sensor's gain is known, the image is shifted so that the
