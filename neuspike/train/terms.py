@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 from neuspike.errors import InputError
 
@@ -444,7 +444,60 @@ def _check_floor(params: dict[str, Any]) -> dict[str, Any]:
         if not isinstance(network, str) or not network.endswith(".safetensors"):
             raise InputError(f"losses.spike_floor.network: expected a spike-only network's .safetensors file, "
                              f"got {network!r}")
-    return _check_noise_weights("losses.spike_floor", params)
+    return _check_noise_weights("losses.spike_floor", {**params, "emphasis": _check_emphasis(params["emphasis"])})
+
+
+_EMPHASIS_RANGES = ("light", "motion")
+
+
+def _check_emphasis(emphasis: Any) -> list[dict[str, Any]] | None:
+    """``losses.spike_floor.emphasis`` checked: None, or a list of {"light": [lo, hi], "motion": [lo, hi],
+    "factor": f > 0}, each range optional (closed; a window's cell must lie in every range given)."""
+    if emphasis is None:
+        return None
+    where = "losses.spike_floor.emphasis"
+    if not isinstance(emphasis, Sequence) or isinstance(emphasis, str) or not emphasis:
+        raise InputError(f"{where}: expected a list of {{light: [lo, hi], motion: [lo, hi], factor: f}}, "
+                         f"got {emphasis!r}")
+    out = []
+    for k, entry in enumerate(emphasis):
+        if not isinstance(entry, Mapping) or "factor" not in entry:
+            raise InputError(f"{where}[{k}]: expected {{light: [lo, hi], motion: [lo, hi], factor: f}} with a "
+                             f"factor, got {entry!r}")
+        unknown = sorted(set(entry) - {"factor", *_EMPHASIS_RANGES})
+        if unknown:
+            raise InputError(f"{where}[{k}]: unknown keys {unknown}; give light, motion and factor")
+        if not any(name in entry for name in _EMPHASIS_RANGES):
+            raise InputError(f"{where}[{k}]: give a light or a motion range (else raise the term's weight)")
+        checked: dict[str, Any] = {"factor": _weight(f"{where}[{k}].factor", entry["factor"])}
+        if not checked["factor"] > 0:
+            raise InputError(f"{where}[{k}].factor: expected > 0, got {entry['factor']!r}")
+        for name in _EMPHASIS_RANGES:
+            if name not in entry:
+                continue
+            r = entry[name]
+            try:
+                lo, hi = (float(v) for v in r)
+            except (TypeError, ValueError):
+                raise InputError(f"{where}[{k}].{name}: expected [low, high], got {r!r}") from None
+            if not lo <= hi:
+                raise InputError(f"{where}[{k}].{name}: expected low <= high, got {r!r}")
+            checked[name] = [lo, hi]
+        out.append(checked)
+    return out
+
+
+def _emphasis_factors(cells: list[dict[str, Any]], emphasis: list[dict[str, Any]]) -> list[float]:
+    """Each window's product of the factors of the emphasis entries whose ranges hold its cell."""
+    factors = []
+    for cell in cells:
+        f = 1.0
+        for entry in emphasis:
+            if all(entry[name][0] <= float(cell[name]) <= entry[name][1] for name in _EMPHASIS_RANGES
+                   if name in entry):
+                f *= entry["factor"]
+        factors.append(f)
+    return factors
 
 
 def _floor_setup(task: Any, params: dict[str, Any]) -> None:
@@ -453,17 +506,20 @@ def _floor_setup(task: Any, params: dict[str, Any]) -> None:
         task.floor_network = task.load_teacher(params["network"], "losses.spike_floor.network", spike_only=True)
 
 
-def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str, network: Any
+def _spike_floor(step: Step, *, weight: float, noise_weights: Any, terms: str, network: Any, emphasis: Any
                  ) -> tuple[Any, dict[str, float]]:
     import torch
 
     if step.variant != "fusion":
         return None, {}
     task = step.task
-    if noise_weights is None:
+    if noise_weights is None and emphasis is None:
         weights: Any = weight or None
     else:
-        w = [noise_weights.get(level, weight) for level in task.noise_levels(step.index)]
+        cells = task.cells(step.index)
+        w = [weight if noise_weights is None else noise_weights.get(cell["noise"], weight) for cell in cells]
+        if emphasis is not None:
+            w = [a * b for a, b in zip(w, _emphasis_factors(cells, emphasis))]
         weights = torch.tensor(w, dtype=torch.float32, device=task.device) if any(w) else None
     if weights is None:
         return None, {}
@@ -501,12 +557,15 @@ register_term(LossTerm("distill", _distill, defaults={"teacher": None}, weight=0
                        setup=_distill_setup,
                        doc="the student's L1 + SSIM-term loss against a trained network's image (the teacher, run on "
                            "each step's inputs in the step's variant)"))
-register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": None, "terms": "both", "network": None},
+register_term(LossTerm("spike_floor", _spike_floor, defaults={"noise_weights": None, "terms": "both", "network": None,
+                                                              "emphasis": None},
                        weight=0.0, check=_check_floor, setup=_floor_setup,
                        doc="fusion steps: relu(l_fusion - l_spike) per crop, l a crop's L1 + SSIM-term loss (terms "
                            "'both') or SSIM loss alone ('ssim'), weighted per crop by its noise level's weight; l_spike "
                            "the network's own spike-only self, or with network (a spike-only network's .safetensors "
-                           "with its JSON card) that trained network's image, held"))
+                           "with its JSON card) that trained network's image, held; with emphasis (a list of "
+                           "{light: [lo, hi], motion: [lo, hi], factor}) the weight of each crop whose window's cell "
+                           "lies in an entry's ranges multiplied by its factor"))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -400,7 +400,7 @@ class WindowTask:
         self.module = method.module
         self.device = method.device
         self.fusion = method.params.get("spike_only") is False
-        self._noise_levels: dict[int, str] = {}  # training window -> its noise level, read once
+        self._cells: dict[int, dict[str, Any]] = {}  # training window -> its cell (light, motion, noise), read once
         self.losses = self.data.losses
         #: The SSIM term's weight and window: also what a crop's own loss weighs (distillation, spike floor).
         self.ssim_weight = self.losses["ssim"]["weight"] if "ssim" in self.losses else 0.0
@@ -504,20 +504,27 @@ class WindowTask:
             idx.append(int(perm[pos]))
         return idx
 
-    def noise_levels(self, step: int) -> list[str]:
-        """The sensor-noise level of each window of ``step``'s batch, in batch order (read from the shard)."""
-        cache = self._noise_levels
-        levels = []
+    def cells(self, step: int) -> list[dict[str, Any]]:
+        """The cell each window of ``step``'s batch was simulated under (its ``light``, ``motion`` and ``noise``
+        among others), in batch order, read from the shard."""
+        cache = self._cells
+        cells = []
         for i in self.batch_indices(step):
             if i not in cache:
                 path = self.train_paths[i]
                 try:
                     with np.load(path) as z:
-                        cache[i] = json.loads(str(z["cell"]))["noise"]
+                        cell = json.loads(str(z["cell"]))
+                    cell["noise"], cell["light"], cell["motion"]
                 except (OSError, KeyError, ValueError) as exc:
-                    raise FormatError(f"{path}: no noise level in the window's cell ({exc})") from exc
-            levels.append(cache[i])
-        return levels
+                    raise FormatError(f"{path}: no light, motion or noise level in the window's cell ({exc})") from exc
+                cache[i] = cell
+            cells.append(cache[i])
+        return cells
+
+    def noise_levels(self, step: int) -> list[str]:
+        """The sensor-noise level of each window of ``step``'s batch, in batch order (read from the shard)."""
+        return [cell["noise"] for cell in self.cells(step)]
 
     def gate_targets(self, step: int, targets: dict[str, dict[str, float]]) -> tuple[torch.Tensor, torch.Tensor] | None:
         """The ``gate_target`` term's ``targets`` for ``step``'s batch as ``(target, mask)``, each (B, 4) in the

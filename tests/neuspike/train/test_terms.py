@@ -18,7 +18,7 @@ def test_a_spec_names_its_terms_with_their_parameters_and_defaults():
     assert WindowData().losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None}}
     got = resolve_losses({"spike_floor": 2, "l1": 1, "offset": {"weight": 0.5}})
     assert list(got) == ["l1", "offset", "spike_floor"]  # the registry's order, whatever the spec's
-    assert got["spike_floor"] == {"weight": 2.0, "noise_weights": None, "terms": "both", "network": None}
+    assert got["spike_floor"] == {"weight": 2.0, "noise_weights": None, "terms": "both", "network": None, "emphasis": None}
     assert resolve_losses({"offset": 0}) == {}  # weight 0 with its defaults: as if not named
     with pytest.raises(InputError, match=r"unknown terms \['wobble'\]; the registered ones: l1, ssim"):
         resolve_losses({"wobble": 1})
@@ -33,7 +33,7 @@ def test_set_reaches_a_term_and_its_parameters():
                                         'data.losses.spike_floor={"weight": 2, "noise_weights": {"high": 16}}'])
     assert spec.data.losses["offset"] == {"weight": 0.5}
     assert spec.data.losses["ssim"] == {"weight": 1.0, "window": 7, "noise_weights": None}
-    assert spec.data.losses["spike_floor"] == {"weight": 2.0, "noise_weights": {"high": 16.0}, "terms": "both", "network": None}
+    assert spec.data.losses["spike_floor"] == {"weight": 2.0, "noise_weights": {"high": 16.0}, "terms": "both", "network": None, "emphasis": None}
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
 
 
@@ -47,7 +47,7 @@ def test_the_earlier_fields_read_into_the_terms_and_every_shipped_spec_loads():
     losses = spec_from_dict(earlier).data.losses
     assert losses == {"l1": {"weight": 1.0}, "ssim": {"weight": 1.0, "window": 11, "noise_weights": None},
                       "distill": {"weight": 1.0, "teacher": "neuspike/trained/neuspike-net.safetensors"},
-                      "spike_floor": {"weight": 2.0, "noise_weights": {"medium": 8.0, "high": 16.0}, "terms": "both", "network": None}}
+                      "spike_floor": {"weight": 2.0, "noise_weights": {"medium": 8.0, "high": 16.0}, "terms": "both", "network": None, "emphasis": None}}
     cards = sorted(PACKAGE_WEIGHTS.glob("*.json"))
     assert cards
     for card in cards:  # the spec behind every shipped network still reads (and round-trips)

@@ -707,6 +707,59 @@ def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tm
     assert seen == positive == {"none", "high"}  # both weights were used, on crops with an excess
 
 
+def test_the_spike_floor_emphasis_multiplies_the_weight_of_crops_whose_cell_lies_in_its_ranges(
+        tmp_path, one_torch_thread):
+    """losses.spike_floor.emphasis: each crop's floor weight (its noise level's, else the term's) times the
+    factor of every entry whose light and motion ranges hold the window's cell, read from the shard as the
+    simulator recorded it: mean_i(w_i * f_i * relu(l_fusion,i - l_spike,i)). Bad entries refused by name."""
+    from neuspike.train.spec import spec_from_dict
+    from neuspike.train.windows import WindowTask
+
+    def floor(**params):
+        return window_data(losses={"l1": 1, "ssim": 1, "spike_floor": {"weight": 0.5, **params}})
+
+    for bad in ([], {"light": [0, 1], "factor": 2}, [{"light": [0, 1]}], [{"factor": 2}],
+                [{"light": [1, 0], "factor": 2}], [{"light": 0.5, "factor": 2}], [{"light": [0, 1], "factor": 0}],
+                [{"speed": [0, 1], "factor": 2}]):
+        with pytest.raises(InputError, match=r"losses.spike_floor.emphasis"):
+            floor(emphasis=bad)
+    lights = (0.05, 0.4)
+    emphasis = [{"light": [0.2, 1.0], "factor": 3.0}, {"motion": [0, 32], "light": [0.0, 1.0], "factor": 5.0}]
+    losses = {"l1": 1, "ssim": 1, "spike_floor": {"weight": 0.5, "noise_weights": {"high": 4.0},
+                                                  "emphasis": emphasis}}
+    common = dict(batch=4, train_items=8, noise_levels=("none", "high"), light_range=lights, motions=(16, 128),
+                  params={"motion_gate": "stats"})
+    spec = tiny_spec(tmp_path, losses=losses, **common)
+    assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
+    assert spec.data.key(0) == tiny_spec(tmp_path, **common).data.key(0)  # (the same windows)
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task = trainer.task
+    plain = WindowTask(tiny_spec(tmp_path, **common), trainer.method)
+    plain.train_paths = task.train_paths
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
+        for p in trainer.module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    factors_seen = set()
+    for step in [k for k in range(40) if task.step_variant(k) == "fusion"][:8]:
+        cells = [load_sample(task.train_paths[i]).meta["cell"] for i in task.batch_indices(step)]
+        assert task.cells(step) == cells
+        w = []
+        for cell in cells:
+            f = (3.0 if cell["light"] >= 0.2 else 1.0) * (5.0 if cell["motion"] <= 32 else 1.0)
+            factors_seen.add(f)
+            w.append((4.0 if cell["noise"] == "high" else 0.5) * f)
+        with torch.no_grad():
+            loss, parts = task.step_loss(step, trainer.autocast)
+            base, _ = plain.step_loss(step, trainer.autocast)
+            inputs, target = task.batch(step)
+            excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
+                      - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0)
+        assert float(loss - base) == pytest.approx(float((torch.tensor(w) * excess).mean()), rel=1e-4, abs=1e-6)
+    assert len(factors_seen) >= 3  # (the windows' draws reach several products of the two entries)
+
+
 def test_the_ssim_term_by_noise_level_weighs_each_crop_by_its_windows_level(tmp_path, one_torch_thread):
     """losses.ssim.noise_weights: the term is mean_i(w_i * s_i), s_i a crop's SSIM loss (1 - SSIM) / 2 from
     kornia's SSIM map and w_i its noise level's weight (the others: the term's weight); without it the term
