@@ -254,8 +254,13 @@ def rerun(entry: Entry, reports: Path, weights: str, work: Path) -> None:
         shutil.rmtree(staged)
     # the folder's own notes (README, manifest, ...) stay; what the run wrote replaces the rest
     if target.is_dir():
-        shutil.copytree(target, staged, ignore=shutil.ignore_patterns("figures", "images", "report.pdf", "results.csv*",
-                                                                        *KEPT))
+        # at the folder's top only: a subfolder of notes (another machine's timing.csv and metadata.json) stays whole
+        run_names = shutil.ignore_patterns("figures", "images", "report.pdf", "results.csv*", *KEPT)
+
+        def from_the_run(folder: str, names: list[str]) -> set[str]:
+            return run_names(folder, names) if Path(folder) == target else set()
+
+        shutil.copytree(target, staged, ignore=from_the_run)
     else:
         staged.mkdir(parents=True)
     for name in KEPT:

@@ -80,6 +80,21 @@ def test_rerun_carries_a_finished_run_whole(tmp_path):
     assert sorted(p.name for p in folder.parent.iterdir()) == ["fake"]  # no staging left behind
 
 
+def test_a_rerun_keeps_subfolders_of_notes_whole_even_where_their_files_share_a_runs_names(tmp_path):
+    """Table 2 on other CPU kinds lives in subfolders (timing/milan/timing.csv, its metadata.json): the run
+    replaces the folder's own config and tables, not those."""
+    folder = _committed(tmp_path)
+    (folder / "milan").mkdir()
+    (folder / "milan" / "config.json").write_text('{"machine": "milan"}')
+    (folder / "milan" / "timing.csv").write_text("method,ms\nsnm,130\n")
+    (folder / "loaded.md").write_text("per-frame time beside another job")
+    rb.rerun(_fake_entry(WRITES_A_RUN), tmp_path / "reports", "unused", tmp_path / "work")
+    assert (folder / "config.json").read_text() == '{"run": "new"}'
+    assert (folder / "milan" / "config.json").read_text() == '{"machine": "milan"}'
+    assert (folder / "milan" / "timing.csv").read_text() == "method,ms\nsnm,130\n"
+    assert (folder / "loaded.md").read_text() == "per-frame time beside another job"
+
+
 def test_a_failed_rerun_leaves_the_committed_folder_as_it_was(tmp_path):
     folder = _committed(tmp_path)
     before = {p.relative_to(folder): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
