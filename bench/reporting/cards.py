@@ -107,7 +107,14 @@ def card(name: str, root: Path = ROOT) -> str:
         *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`), at commit "
            f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
            f".safetensors > start.safetensors` (its card likewise), then point the spec's `init_from` at it."]
-          if isinstance(meta.get("previous"), dict) and meta["previous"].get("commit") else []),
+          if isinstance(meta.get("previous"), dict) and meta["previous"].get("commit")
+          and not meta["previous"].get("via") else []),
+        *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`, at commit "
+           f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
+           f".safetensors > start.safetensors`) through one unshipped stage: that stage's spec is the card's "
+           f"`previous.via.spec` (its `init_from` the file shipped before), its step {meta['previous']['via']['step']:,} "
+           f"(sha256 `{meta['previous']['via']['sha256'][:12]}...`) is this spec's `init_from`."]
+          if isinstance(meta.get("previous"), dict) and meta["previous"].get("via") else []),
         (f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
          f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
          "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`)."
