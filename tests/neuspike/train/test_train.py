@@ -660,6 +660,35 @@ def test_the_spike_floor_adds_the_fusions_excess_over_its_spike_only_self_and_va
     assert shut_parts["spike_floor"] == pytest.approx(0.0, abs=1e-6)
 
 
+def _moved_beside_plain(spec: TrainSpec, plain_spec: TrainSpec):
+    """A prepared trainer for ``spec`` with every weight moved (a fresh network's image does not depend on its
+    features), and a task of ``plain_spec`` (the same data, without the term under test) on the same windows and
+    the same module: the difference of their step losses is the term."""
+    from neuspike.train.windows import WindowTask
+
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    plain = WindowTask(plain_spec, trainer.method)
+    plain.train_paths = trainer.task.train_paths
+    gen = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for p in trainer.module.parameters():
+            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    return trainer, trainer.task, plain
+
+
+def _floor_step(trainer, task, plain, step: int):
+    """``step``'s loss less the plain task's (the term under test), the step's logged parts, and each crop's
+    excess relu(l_fusion - l_spike), the two forwards computed here."""
+    with torch.no_grad():
+        loss, parts = task.step_loss(step, trainer.autocast)
+        base, _ = plain.step_loss(step, trainer.autocast)
+        inputs, target = task.batch(step)
+        excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
+                  - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0)
+    return loss - base, parts, excess
+
+
 def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tmp_path, one_torch_thread):
     """spike_floor_noise_weights gives the crops of the named noise levels their own floor weight (the
     others keep spike_floor_weight): the term is mean_i(w_i * relu(l_fusion,i - l_spike,i)), each crop's
@@ -678,30 +707,18 @@ def test_the_spike_floor_by_noise_level_weighs_each_crop_by_its_windows_level(tm
     spec = tiny_spec(tmp_path, batch=4, train_items=6, noise_levels=("none", "high"), spike_floor_weight=0.5,
                      spike_floor_noise_weights={"high": 4.0}, params={"motion_gate": "stats"})
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
-    trainer = Trainer(spec, quiet=True)
-    trainer.task.prepare(trainer._bar)
-    task = trainer.task
-    plain = WindowTask(tiny_spec(tmp_path, batch=4, train_items=6, noise_levels=("none", "high"),
-                                 params={"motion_gate": "stats"}), trainer.method)
-    plain.train_paths = task.train_paths
-    gen = torch.Generator().manual_seed(0)
-    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
-        for p in trainer.module.parameters():
-            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    trainer, task, plain = _moved_beside_plain(spec, tiny_spec(tmp_path, batch=4, train_items=6,
+                                                               noise_levels=("none", "high"),
+                                                               params={"motion_gate": "stats"}))
     seen, positive = set(), set()
     for step in [k for k in range(40) if task.step_variant(k) == "fusion"][:8]:  # (enough crops of each level)
         levels = [load_sample(task.train_paths[i]).meta["cell"]["noise"] for i in task.batch_indices(step)]
         assert task.noise_levels(step) == levels
         seen.update(levels)
         weights = torch.tensor([4.0 if level == "high" else 0.5 for level in levels])
-        with torch.no_grad():
-            loss, parts = task.step_loss(step, trainer.autocast)
-            base, _ = plain.step_loss(step, trainer.autocast)
-            inputs, target = task.batch(step)
-            excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
-                      - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0)
+        term, parts, excess = _floor_step(trainer, task, plain, step)
         # (the two losses are near 2 here: float32 rounds their difference to a few 1e-7)
-        assert float(loss - base) == pytest.approx(float((weights * excess).mean()), rel=1e-4, abs=1e-6)
+        assert float(term) == pytest.approx(float((weights * excess).mean()), rel=1e-4, abs=1e-6)
         assert parts["spike_floor"] == pytest.approx(float(excess.mean()), rel=1e-5, abs=1e-7)
         positive.update(level for level, e in zip(levels, excess.tolist()) if e > 0)
     assert seen == positive == {"none", "high"}  # both weights were used, on crops with an excess
@@ -713,7 +730,6 @@ def test_the_spike_floor_emphasis_multiplies_the_weight_of_crops_whose_cell_lies
     factor of every entry whose light and motion ranges hold the window's cell, read from the shard as the
     simulator recorded it: mean_i(w_i * f_i * relu(l_fusion,i - l_spike,i)). Bad entries refused by name."""
     from neuspike.train.spec import spec_from_dict
-    from neuspike.train.windows import WindowTask
 
     def floor(**params):
         return window_data(losses={"l1": 1, "ssim": 1, "spike_floor": {"weight": 0.5, **params}})
@@ -732,15 +748,7 @@ def test_the_spike_floor_emphasis_multiplies_the_weight_of_crops_whose_cell_lies
     spec = tiny_spec(tmp_path, losses=losses, **common)
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
     assert spec.data.key(0) == tiny_spec(tmp_path, **common).data.key(0)  # (the same windows)
-    trainer = Trainer(spec, quiet=True)
-    trainer.task.prepare(trainer._bar)
-    task = trainer.task
-    plain = WindowTask(tiny_spec(tmp_path, **common), trainer.method)
-    plain.train_paths = task.train_paths
-    gen = torch.Generator().manual_seed(0)
-    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
-        for p in trainer.module.parameters():
-            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    trainer, task, plain = _moved_beside_plain(spec, tiny_spec(tmp_path, **common))
     factors_seen = set()
     for step in [k for k in range(40) if task.step_variant(k) == "fusion"][:8]:
         cells = [load_sample(task.train_paths[i]).meta["cell"] for i in task.batch_indices(step)]
@@ -750,13 +758,8 @@ def test_the_spike_floor_emphasis_multiplies_the_weight_of_crops_whose_cell_lies
             f = (3.0 if cell["light"] >= 0.2 else 1.0) * (5.0 if cell["motion"] <= 32 else 1.0)
             factors_seen.add(f)
             w.append((4.0 if cell["noise"] == "high" else 0.5) * f)
-        with torch.no_grad():
-            loss, parts = task.step_loss(step, trainer.autocast)
-            base, _ = plain.step_loss(step, trainer.autocast)
-            inputs, target = task.batch(step)
-            excess = (task.crop_losses(task.forward(inputs, "fusion"), target)
-                      - task.crop_losses(task.forward(inputs, "spike"), target)).clamp_min(0)
-        assert float(loss - base) == pytest.approx(float((torch.tensor(w) * excess).mean()), rel=1e-4, abs=1e-6)
+        term, _, excess = _floor_step(trainer, task, plain, step)
+        assert float(term) == pytest.approx(float((torch.tensor(w) * excess).mean()), rel=1e-4, abs=1e-6)
     assert len(factors_seen) >= 3  # (the windows' draws reach several products of the two entries)
 
 
@@ -807,15 +810,7 @@ def test_the_spike_floor_on_ssim_alone_compares_each_crops_structure_only(tmp_pa
     small = dict(batch=4, train_items=6, params={"motion_gate": "stats"})
     spec = tiny_spec(tmp_path, spike_floor_weight=3.0, spike_floor_terms="ssim", **small)
     assert spec_from_dict(json.loads(json.dumps(spec.as_dict()))) == spec
-    trainer = Trainer(spec, quiet=True)
-    trainer.task.prepare(trainer._bar)
-    task = trainer.task
-    plain = WindowTask(tiny_spec(tmp_path, **small), trainer.method)
-    plain.train_paths = task.train_paths
-    gen = torch.Generator().manual_seed(0)
-    with torch.no_grad():  # a fresh network's image does not depend on its features: move every weight
-        for p in trainer.module.parameters():
-            p.add_(0.1 * torch.randn(p.shape, generator=gen))
+    trainer, task, plain = _moved_beside_plain(spec, tiny_spec(tmp_path, **small))
     checked = 0
     # the fusion's SSIM is worse than its spike-only self's on some crops of a moved network, not on all:
     # every fusion step is checked, and at least one of them with a positive term
