@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -77,6 +78,23 @@ def _history_paths(text: str) -> str:
     return text
 
 
+def _started_from(name: str, previous: Any) -> list[str]:
+    """The card's line on the file a stage started from: the file shipped before it, directly or through one
+    unshipped stage (``previous.via``, whose spec the JSON card holds); none without a ``previous`` commit."""
+    if not isinstance(previous, dict) or not previous.get("commit"):
+        return []
+    commit = previous["commit"][:12]
+    shipped = f"the file shipped before it (sha256 `{previous['sha256'][:12]}...`"
+    show = f"`git show {commit}:neuspike/trained/{name}.safetensors > start.safetensors`"
+    via = previous.get("via")
+    if not via:
+        return [f"**Started from:** {shipped}), at commit `{commit}`: {show} (its card likewise), then point the "
+                f"spec's `init_from` at it."]
+    return [f"**Started from:** {shipped}, at commit `{commit}`: {show}) through one unshipped stage: that stage's "
+            f"spec is the card's `previous.via.spec` (its `init_from` the file shipped before), its step "
+            f"{via['step']:,} (sha256 `{via['sha256'][:12]}...`) is this spec's `init_from`."]
+
+
 def card(name: str, root: Path = ROOT) -> str:
     meta = json.loads((root / "neuspike" / "trained" / f"{name}.json").read_text())
     training, data = meta.get("training", {}), meta.get("data", {})
@@ -104,17 +122,7 @@ def card(name: str, root: Path = ROOT) -> str:
         + (f"; `--export` would replace the full network's files: leave it out, and copy the run's `{export}` files "
            f"to `{name}.safetensors` and `{name}.json`" if name.endswith("-lite") else "; `--export` replaces this file")
         + ".",
-        *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`), at commit "
-           f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
-           f".safetensors > start.safetensors` (its card likewise), then point the spec's `init_from` at it."]
-          if isinstance(meta.get("previous"), dict) and meta["previous"].get("commit")
-          and not meta["previous"].get("via") else []),
-        *([f"**Started from:** the file shipped before it (sha256 `{meta['previous']['sha256'][:12]}...`, at commit "
-           f"`{meta['previous']['commit'][:12]}`: `git show {meta['previous']['commit'][:12]}:neuspike/trained/{name}"
-           f".safetensors > start.safetensors`) through one unshipped stage: that stage's spec is the card's "
-           f"`previous.via.spec` (its `init_from` the file shipped before), its step {meta['previous']['via']['step']:,} "
-           f"(sha256 `{meta['previous']['via']['sha256'][:12]}...`) is this spec's `init_from`."]
-          if isinstance(meta.get("previous"), dict) and meta["previous"].get("via") else []),
+        *_started_from(name, meta.get("previous")),
         (f"**History:** the stages before this file (their specs, selection rules, logs and probes) left the tree; "
          f"they stay at commit `{HISTORY_COMMIT[:8]}`: `git show {HISTORY_COMMIT[:8]}:{HISTORY[name]}/README.md` "
          "(a `--depth 1` clone fetches it with `git fetch --depth 1 origin " + HISTORY_COMMIT + "`)."

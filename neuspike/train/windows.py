@@ -515,9 +515,11 @@ class WindowTask:
                 try:
                     with np.load(path) as z:
                         cell = json.loads(str(z["cell"]))
-                    cell["noise"], cell["light"], cell["motion"]
                 except (OSError, KeyError, ValueError) as exc:
-                    raise FormatError(f"{path}: no light, motion or noise level in the window's cell ({exc})") from exc
+                    raise FormatError(f"{path}: no cell recorded with the window ({exc})") from exc
+                missing = sorted({"light", "motion", "noise"} - set(cell))
+                if missing:
+                    raise FormatError(f"{path}: the window's cell records no {', '.join(missing)}")
                 cache[i] = cell
             cells.append(cache[i])
         return cells

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from neuspike.errors import InputError
+from neuspike.errors import FormatError, InputError
 from neuspike.train import TrainSpec, WindowData, learning_rate, load_spec
 from neuspike.train.loop import Trainer
 from neuspike.train.mixture import LEGACY_DATA_FIELDS, legacy_mixture
@@ -483,8 +483,6 @@ def test_auto_precision_takes_bfloat16_only_when_a_measured_step_is_faster_and_a
     plain = Trainer(tiny_spec(tmp_path / "f32", precision="float32"), quiet=True).choose_precision()
     assert plain == {"choice": "float32", "requested": "float32", "measured": False}
     # a damaged record is one line naming the file, not a traceback
-    from neuspike.errors import FormatError
-
     for text in ("garbage{", "[1, 2]", '{"choice": "float16"}'):
         (tmp_path / "run" / "precision.json").write_text(text)
         with pytest.raises(FormatError, match="precision.json"):
@@ -761,6 +759,25 @@ def test_the_spike_floor_emphasis_multiplies_the_weight_of_crops_whose_cell_lies
         term, _, excess = _floor_step(trainer, task, plain, step)
         assert float(term) == pytest.approx(float((torch.tensor(w) * excess).mean()), rel=1e-4, abs=1e-6)
     assert len(factors_seen) >= 3  # (the windows' draws reach several products of the two entries)
+
+
+def test_a_window_whose_cell_lacks_its_light_motion_or_noise_is_refused_by_name(tmp_path):
+    import numpy as np
+
+    spec = tiny_spec(tmp_path, batch=2, train_items=2)
+    trainer = Trainer(spec, quiet=True)
+    trainer.task.prepare(trainer._bar)
+    task = trainer.task
+    for path in task.train_paths:
+        with np.load(path) as z:
+            arrays = {k: z[k] for k in z.files}
+        cell = json.loads(str(arrays["cell"]))
+        del cell["motion"]
+        arrays["cell"] = json.dumps(cell)
+        with open(path, "wb") as f:
+            np.savez(f, **arrays)
+    with pytest.raises(FormatError, match="the window's cell records no motion"):
+        task.cells(0)
 
 
 def test_the_ssim_term_by_noise_level_weighs_each_crop_by_its_windows_level(tmp_path, one_torch_thread):
